@@ -1,0 +1,1 @@
+"""Analyses of a chart: its graph, loops and lint checks."""

@@ -1,0 +1,60 @@
+"""The chart as a networkx graph: one node per signal (chart inputs and blocks), one edge per use."""
+
+from __future__ import annotations
+
+import networkx as nx
+
+from ..diagram.model import Diagram
+
+__all__ = ["chart_graph", "delay_free_graph", "algebraic_graph", "distances"]
+
+
+def chart_graph(diagram: Diagram) -> nx.DiGraph:
+    """Directed graph source -> consumer. Node attribute `kind` is the block kind or 'input'."""
+    g = nx.DiGraph()
+    for s in diagram.inputs:
+        g.add_node(s.name, kind="input")
+    for b in diagram.blocks:
+        g.add_node(b.name, kind=b.kind)
+    for b in diagram.blocks:
+        for t in b.inputs:
+            if t.signal in g:
+                g.add_edge(t.signal, b.name)
+    return g
+
+
+def delay_free_graph(g: nx.DiGraph) -> nx.DiGraph:
+    """Edges along which a signal arrives in the same sample: everything but the outputs of delay blocks."""
+    h = nx.DiGraph()
+    h.add_nodes_from(g.nodes(data=True))
+    h.add_edges_from((u, v) for u, v in g.edges if g.nodes[u]["kind"] != "delay")
+    return h
+
+
+def algebraic_graph(g: nx.DiGraph) -> nx.DiGraph:
+    """Edges with direct feedthrough: a cycle here has neither an integrator nor a delay (an algebraic loop).
+
+    The analysis works per edge, not per block: only the edge into an integrator is cut, so a loop that merely
+    touches an integrator's output is still reported.
+    """
+    h = delay_free_graph(g)
+    h.remove_edges_from([(u, v) for u, v in list(h.edges) if g.nodes[v]["kind"] == "integrator"])
+    return h
+
+
+def distances(g: nx.DiGraph, sources, reverse: bool = False) -> dict[str, int]:
+    """Breadth-first hop count from any of `sources` (to them when reverse); unreachable nodes are absent."""
+    h = g.reverse(copy=False) if reverse else g
+    dist: dict[str, int] = {}
+    frontier = [s for s in sources if s in h]
+    for s in frontier:
+        dist[s] = 0
+    while frontier:
+        nxt = []
+        for u in frontier:
+            for v in h.successors(u):
+                if v not in dist:
+                    dist[v] = dist[u] + 1
+                    nxt.append(v)
+        frontier = nxt
+    return dist

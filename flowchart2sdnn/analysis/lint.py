@@ -1,0 +1,237 @@
+"""Semantic checks of a validated chart. Returns diagnostics; never raises for a chart problem.
+
+| code    | severity | what |
+|---------|----------|------|
+| LINT001 | error    | algebraic loop (a cycle with neither an integrator nor a delay) |
+| LINT002 | warning  | block whose output nobody uses (a dangling signal) |
+| LINT003 | warning  | parameter no block uses |
+| LINT004 | warning  | output not reachable from any input |
+| LINT005 | error    | unit mismatch (sum of unlike units, declared unit disagrees with the computed one) |
+| LINT006 | error    | parameter bounds: min >= max, or init outside [min, max] |
+| LINT007 | warning  | parameters (or learned weights) that only appear together and cannot be identified apart |
+| LINT008 | error    | bad unit text |
+| LINT009 | warning  | argument of a function block is not dimensionless |
+| LINT010 | error    | chart with no input or no output |
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from ..diagram.expr import Expr
+from ..diagram.model import Diagram
+from ..diagram.units import DIMENSIONLESS, Unit, UnitError, parse_unit, unit_of_expr
+from ..errors import Diagnostic, Location
+from .graph import chart_graph, distances
+from .loops import find_algebraic_loops
+
+__all__ = ["lint_diagram"]
+
+
+def lint_diagram(diagram: Diagram) -> list[Diagnostic]:
+    out: list[Diagnostic] = []
+    for check in (_io, _algebraic_loops, _unused, _reachability, _bounds, _units, _identifiability):
+        out.extend(check(diagram))
+    return out
+
+
+def _loc(diagram: Diagram, obj) -> Location:
+    return getattr(obj, "location", None) or Location(diagram.file)
+
+
+def _io(diagram: Diagram):
+    if not diagram.inputs:
+        yield Diagnostic("LINT010", "error", "the chart has no inputs; identification needs a measured excitation",
+                         Location(diagram.file, 1), hint="list the excitation signals under 'inputs:'")
+    if not diagram.outputs:
+        yield Diagnostic("LINT010", "error", "the chart has no outputs; nothing would be fitted",
+                         Location(diagram.file, 1), hint="list the measured signals under 'outputs:'")
+
+
+def _algebraic_loops(diagram: Diagram):
+    g = chart_graph(diagram)
+    for loop in find_algebraic_loops(g):
+        first = diagram.block(loop[0])
+        path = " -> ".join(loop + (loop[0],))
+        yield Diagnostic(
+            "LINT001", "error", f"algebraic loop {path}: no integrator or delay on it",
+            _loc(diagram, first), loop[0],
+            f"insert an integrator or a delay on the loop, e.g. between '{loop[-1]}' and '{loop[0]}'",
+        )
+
+
+def _unused(diagram: Diagram):
+    used_signals = {t.signal for b in diagram.blocks for t in b.inputs} | set(diagram.output_names)
+    for b in diagram.blocks:
+        if b.name not in used_signals:
+            yield Diagnostic("LINT002", "warning", "output of this block is used by no block and is not an output",
+                             _loc(diagram, b), b.name, "remove it or list it under 'outputs:'")
+    for s in diagram.inputs:
+        if s.name not in used_signals:
+            yield Diagnostic("LINT002", "warning", f"input '{s.name}' is used by no block", _loc(diagram, s))
+    used_params: set[str] = set()
+    for b in diagram.blocks:
+        if b.k is not None:
+            used_params |= b.k.variables
+    for p in diagram.parameters:
+        if p.name not in used_params:
+            yield Diagnostic("LINT003", "warning", f"parameter '{p.name}' is used by no block", _loc(diagram, p),
+                             hint="remove it or use it in a gain")
+
+
+def _reachability(diagram: Diagram):
+    g = chart_graph(diagram)
+    reach = distances(g, diagram.input_names)
+    for s in diagram.outputs:
+        if s.name in g and s.name not in reach and diagram.inputs:
+            yield Diagnostic("LINT004", "warning", f"output '{s.name}' is not reachable from any input",
+                             _loc(diagram, s), s.name, "its parameters cannot be excited by the data")
+
+
+def _bounds(diagram: Diagram):
+    for p in diagram.parameters:
+        if p.min is not None and p.max is not None and p.min >= p.max:
+            yield Diagnostic("LINT006", "error", f"parameter '{p.name}': min {p.min} is not below max {p.max}",
+                             _loc(diagram, p))
+        elif p.min is not None and p.init < p.min:
+            yield Diagnostic("LINT006", "error", f"parameter '{p.name}': init {p.init} is below min {p.min}",
+                             _loc(diagram, p))
+        elif p.max is not None and p.init > p.max:
+            yield Diagnostic("LINT006", "error", f"parameter '{p.name}': init {p.init} is above max {p.max}",
+                             _loc(diagram, p))
+
+
+# ---------------------------------------------------------------------------------------------- units
+def _units(diagram: Diagram):
+    diags: list[Diagnostic] = []
+
+    def parse(text: str | None, obj, what: str) -> Unit | None:
+        if text is None:
+            return None
+        try:
+            return parse_unit(text)
+        except UnitError as exc:
+            diags.append(Diagnostic("LINT008", "error", f"{what}: bad unit '{text}': {exc.message}",
+                                    _loc(diagram, obj), getattr(obj, "name", None)))
+            return None
+
+    pu = {p.name: parse(p.unit, p, f"parameter '{p.name}'") for p in diagram.parameters}
+    declared: dict[str, Unit | None] = {}
+    for s in diagram.inputs:
+        declared[s.name] = parse(s.unit, s, f"input '{s.name}'")
+    out_units = {s.name: parse(s.unit, s, f"output '{s.name}'") for s in diagram.outputs}
+    for b in diagram.blocks:
+        declared[b.name] = parse(b.unit, b, f"block '{b.name}'")
+    unit = {k: v for k, v in declared.items() if v is not None}
+    for name, u in out_units.items():
+        if u is None:
+            continue
+        if name in unit and not _same(unit[name], u):
+            diags.append(Diagnostic("LINT005", "error", f"output '{name}' declared as {u} but the block says "
+                                    f"{unit[name]}", _loc(diagram, diagram.block(name)), name))
+        unit.setdefault(name, u)
+    reported: set[str] = set()
+    second = parse_unit("s")
+    for _ in range(len(diagram.blocks) + 1):  # fixed point: feedback signals get units from declared ones
+        changed = False
+        for b in diagram.blocks:
+            ins = [unit.get(t.signal) for t in b.inputs]
+            computed: Unit | None = None
+            try:
+                if b.kind == "sum":
+                    known = [(t.signal, u) for t, u in zip(b.inputs, ins, strict=True) if u is not None]
+                    for sig, u in known[1:]:
+                        if not _same(u, known[0][1]) and b.name not in reported:
+                            reported.add(b.name)
+                            diags.append(Diagnostic(
+                                "LINT005", "error",
+                                f"sum of unlike units: '{known[0][0]}' is {known[0][1]} but '{sig}' is {u}",
+                                _loc(diagram, b), b.name))
+                    computed = known[0][1] if known and len(known) == len(ins) else None
+                elif b.kind == "gain" and ins[0] is not None:
+                    ku = unit_of_expr(b.k, pu)
+                    computed = ins[0] * ku if ku is not None else None
+                elif b.kind == "integrator" and ins[0] is not None:
+                    computed = ins[0] * second
+                elif b.kind == "delay":
+                    computed = ins[0]
+                elif b.kind == "constant":
+                    computed = unit_of_expr(b.k, pu)
+                elif b.kind == "function":
+                    computed = DIMENSIONLESS
+                    ku = unit_of_expr(b.k, pu) if b.k is not None else DIMENSIONLESS
+                    if ins[0] is not None and ku is not None:
+                        arg = ins[0] * ku
+                        if not arg.is_dimensionless and b.name not in reported and b.f != "sign_smooth":
+                            reported.add(b.name)
+                            diags.append(Diagnostic("LINT009", "warning",
+                                                    f"argument of {b.f} has unit {arg}, expected dimensionless",
+                                                    _loc(diagram, b), b.name))
+            except UnitError as exc:
+                if b.name not in reported:
+                    reported.add(b.name)
+                    diags.append(Diagnostic("LINT005", "error", f"units of 'k' do not add up: {exc.message}",
+                                            _loc(diagram, b), b.name))
+                computed = None
+            if computed is None:
+                continue
+            have = unit.get(b.name)
+            if have is None:
+                unit[b.name] = computed
+                changed = True
+            elif not _same(have, computed) and b.name not in reported:
+                reported.add(b.name)
+                diags.append(Diagnostic("LINT005", "error", f"unit mismatch: declared or expected {have}, but the "
+                                        f"inputs give {computed}", _loc(diagram, b), b.name,
+                                        "check the units of the gain's parameters and of its input"))
+        if not changed:
+            break
+    return diags
+
+
+def _same(a: Unit, b: Unit) -> bool:
+    return a == b
+
+
+# ---------------------------------------------------------------------------------------------- identifiability
+def _identifiability(diagram: Diagram):
+    """Structural check: the map (free parameters) -> (gain values) must have full rank.
+
+    Two parameters that only ever appear together (a product J*r, a ratio c/k) give proportional columns of
+    d(gains)/d(parameters); no data can tell them apart. Learned curves behind a gain (k * v_i) are included.
+    """
+    free = [p for p in diagram.parameters if not p.fixed]
+    if len(free) < 2:
+        return
+    env = diagram.parameter_values()
+    exprs: list[Expr] = [b.k for b in diagram.blocks if b.k is not None and not b.k.is_constant]
+    if not exprs:
+        return
+    cols = []
+    for p in free:
+        col = []
+        for e in exprs:
+            try:
+                col.append(e.diff(p.name).evaluate(env) * (abs(p.init) or 1.0))
+            except Exception:  # noqa: BLE001 - a singular point: skip the check rather than guess
+                return
+        cols.append(col)
+    d = np.array(cols).T
+    if not np.all(np.isfinite(d)):
+        return
+    # scale rows so each gain counts equally
+    norms = np.linalg.norm(d, axis=1, keepdims=True)
+    norms[norms == 0] = 1.0
+    d = d / norms
+    _, s, vt = np.linalg.svd(d)
+    if s.size == 0:
+        return
+    for i in range(len(free)):
+        sv = s[i] if i < len(s) else 0.0
+        if sv <= 1e-9 * max(s[0], 1e-300):
+            names = [free[j].name for j in np.flatnonzero(np.abs(vt[i]) > 1e-6)]
+            if len(names) >= 2:
+                yield Diagnostic(
+                    "LINT007", "warning",
+                    f"parameters {', '.join(names)} only appear together and cannot be identified separately",
+                    _loc(diagram, free[0]), hint=f"fix all but one of {', '.join(names)} (fixed: true)")

@@ -1,0 +1,166 @@
+"""Discretize a chart: blocks become neurons, gain chains and delays fold into connections.
+
+Which blocks become neurons (the paper's summing junctions):
+- sum -> one linear neuron; integrator -> one linear neuron with a self connection a(t-1) (implicit Euler:
+  y(t) = y(t-1) + T*x(t); its inputs carry the factor T); function -> one neuron with transfer f;
+  nonlinear -> `neurons` tanh neurons whose output weights v_i sit on the consumers' connections;
+- gain, delay and constant blocks are folded: a gain multiplies the connection's coefficient, a delay adds
+  samples to its delay, a constant becomes a bias. A folded block that is a chart output gets a linear
+  read-out neuron of its own.
+The feedback edges chosen by loop analysis add one sample of delay (explicit Euler in the feedback path).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..diagram.expr import Expr, const, mul, neg
+from ..diagram.model import Block, Diagram
+from ..errors import SdnnError
+from ..analysis.loops import LoopReport
+
+__all__ = ["Source", "Connection", "NeuronBlock", "DiscreteChart", "discretize", "NEURON_KINDS"]
+
+NEURON_KINDS = ("sum", "integrator", "function", "nonlinear")
+_TRANSFER = {"tanh": "tanh", "sin": "sin", "cos": "cos", "sign_smooth": "tanh"}
+DEFAULT_EPS = 1e-3
+
+
+@dataclass(frozen=True)
+class Source:
+    """Where a connection comes from: a neuron (block, index), a chart input, or a constant (bias)."""
+
+    kind: str  # "neuron" | "input" | "bias"
+    name: str
+    index: int = 0
+
+
+@dataclass(frozen=True)
+class Connection:
+    """target neuron += coef * (free weight) * source(t - delay)."""
+
+    source: Source
+    coef: Expr
+    delay: int
+    free: str | None
+    origin: tuple[str, ...]  # chart signals along the folded path, source first
+
+
+@dataclass(frozen=True)
+class NeuronBlock:
+    """A chart block (or an output read-out) realised as neurons: one layer of the network."""
+
+    name: str
+    kind: str  # block kind, or "readout"
+    transfers: tuple[str, ...]
+    inputs: tuple[tuple[Connection, ...], ...]  # per neuron
+    init: tuple[float | str, ...] | None = None  # integrators: history value or "data"
+
+
+@dataclass(frozen=True)
+class DiscreteChart:
+    name: str
+    sample_time: float
+    neuron_blocks: tuple[NeuronBlock, ...]
+    free_weights: tuple[tuple[str, str, str, float, bool], ...]  # (name, block, role, init, fixed)
+    outputs: tuple[tuple[str, str, int], ...]  # (output signal, neuron block, neuron index)
+
+
+def initial_nonlinear_weights(block: Block, seed: int, position: int) -> dict[str, np.ndarray]:
+    """Stored weights when the chart has them, else uniform draws in init_range (seeded per block position)."""
+    s = block.neurons or 3
+    if block.weights is not None:
+        w = block.weights
+        return {"a": np.array(w.a), "v": np.array(w.v), "b": np.array(w.b) if w.b is not None else np.zeros(s)}
+    lo, hi = block.init_range or (-0.5, 0.5)
+    rng = np.random.default_rng([seed, position])
+    a, v = rng.uniform(lo, hi, s), rng.uniform(lo, hi, s)
+    b = rng.uniform(lo, hi, s) if block.bias else np.zeros(s)
+    return {"a": a, "v": v, "b": b}
+
+
+def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0) -> DiscreteChart:
+    blocks = {b.name: b for b in diagram.blocks}
+    inputs = set(diagram.input_names)
+    delayed = loops.delayed
+    rank = {name: i for i, name in enumerate(loops.order)}
+
+    def trace(signal: str, consumer: str, coef: Expr, delay: int, path: tuple[str, ...]) -> list[Connection]:
+        delay += 1 if (signal, consumer) in delayed else 0
+        path = (signal,) + path
+        if signal in inputs:
+            return [Connection(Source("input", signal), coef, delay, None, path)]
+        b = blocks[signal]
+        if b.kind in ("sum", "integrator", "function"):
+            return [Connection(Source("neuron", b.name), coef, delay, None, path)]
+        if b.kind == "nonlinear":
+            return [Connection(Source("neuron", b.name, i), coef, delay, f"{b.name}.v{i + 1}", path)
+                    for i in range(b.neurons)]
+        if b.kind == "constant":
+            return [Connection(Source("bias", b.name), mul(coef, b.k), 0, None, path)]
+        (term,) = b.inputs
+        factor = b.k if b.kind == "gain" else const(1.0)
+        if term.sign < 0:
+            factor = neg(factor)
+        extra = b.n if b.kind == "delay" else 0
+        return trace(term.signal, b.name, mul(coef, factor), delay + extra, path)
+
+    def terms_of(b: Block, scale: Expr) -> tuple[Connection, ...]:
+        out: list[Connection] = []
+        for t in b.inputs:
+            sign = const(float(t.sign))
+            out.extend(trace(t.signal, b.name, mul(scale, sign), 0, (b.name,)))
+        return tuple(out)
+
+    neuron_blocks: list[NeuronBlock] = []
+    free: list[tuple[str, str, str, float, bool]] = []
+    T = const(diagram.sample_time)
+    for b in sorted(diagram.blocks, key=lambda b: rank.get(b.name, len(rank))):
+        if b.kind == "sum":
+            neuron_blocks.append(NeuronBlock(b.name, b.kind, ("linear",), (terms_of(b, const(1.0)),)))
+        elif b.kind == "integrator":
+            self_loop = Connection(Source("neuron", b.name), const(1.0), 1, None, (b.name, b.name))
+            conns = (self_loop,) + terms_of(b, T)
+            neuron_blocks.append(NeuronBlock(b.name, b.kind, ("linear",), (conns,), (b.init if b.init is not None
+                                                                                      else 0.0,)))
+        elif b.kind == "function":
+            k = b.k if b.k is not None else const(1.0)
+            if b.f == "sign_smooth":
+                k = mul(k, const(1.0 / (b.eps or DEFAULT_EPS)))
+            neuron_blocks.append(NeuronBlock(b.name, b.kind, (_TRANSFER[b.f],), (terms_of(b, k),)))
+        elif b.kind == "nonlinear":
+            w = initial_nonlinear_weights(b, seed, rank.get(b.name, 0))
+            (base,) = [terms_of(b, const(1.0))]
+            if any(c.free is not None for c in base):
+                raise SdnnError.at(
+                    "COMPILE001", "a nonlinear block cannot take another nonlinear block's output directly",
+                    diagram.file, b.location.line if b.location else None, block=b.name,
+                    hint="put a sum or function block in between")
+            per_neuron = []
+            for i in range(b.neurons):
+                conns = tuple(
+                    Connection(c.source, c.coef, c.delay, f"{b.name}.a{i + 1}", c.origin) for c in base
+                )
+                if b.bias:
+                    conns += (Connection(Source("bias", b.name), const(1.0), 0, f"{b.name}.b{i + 1}", (b.name,)),)
+                per_neuron.append(conns)
+                free.append((f"{b.name}.a{i + 1}", b.name, "a", float(w["a"][i]), bool(b.fixed)))
+                free.append((f"{b.name}.v{i + 1}", b.name, "v", float(w["v"][i]), bool(b.fixed)))
+                if b.bias:
+                    free.append((f"{b.name}.b{i + 1}", b.name, "b", float(w["b"][i]), bool(b.fixed)))
+            neuron_blocks.append(NeuronBlock(b.name, b.kind, ("tanh",) * b.neurons, tuple(per_neuron)))
+
+    outputs = []
+    for s in diagram.outputs:
+        b = blocks[s.name]
+        if b.kind in ("sum", "integrator", "function"):
+            outputs.append((s.name, b.name, 0))
+            continue
+        # folded blocks (and a nonlinear block's weighted sum) are read out by a linear neuron of their own
+        readout = f"{b.name}__out"
+        conns = tuple(trace(b.name, readout, const(1.0), 0, (readout,)))
+        neuron_blocks.append(NeuronBlock(readout, "readout", ("linear",), (conns,)))
+        outputs.append((s.name, readout, 0))
+    return DiscreteChart(diagram.name, diagram.sample_time, tuple(neuron_blocks), tuple(free), tuple(outputs))

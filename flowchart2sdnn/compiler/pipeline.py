@@ -1,0 +1,47 @@
+"""compile_diagram: load -> validate -> lint -> loop analysis -> discretize -> emit.
+
+Each pass is a pure function over frozen data; a pass that finds the chart unusable raises SdnnError with the
+diagnostics of that pass.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+from pathlib import Path
+
+from ..analysis.lint import lint_diagram
+from ..analysis.loops import LoopReport, analyse_loops
+from ..diagram.model import Diagram
+from ..diagram.validate import load_diagram
+from ..errors import SdnnError
+from ..network.model import Network
+from .discretize import DiscreteChart, discretize
+from .emit import emit_network
+
+__all__ = ["Compilation", "compile_diagram", "compile_file"]
+
+
+@dataclass(frozen=True)
+class Compilation:
+    """Everything the passes made, for `--explain` and `--dump-after`."""
+
+    diagram: Diagram
+    loops: LoopReport
+    discrete: DiscreteChart
+    network: Network
+    warnings: tuple
+
+
+def compile_diagram(diagram: Diagram, seed: int = 0) -> Compilation:
+    diagnostics = lint_diagram(diagram)
+    errors = [d for d in diagnostics if d.severity == "error"]
+    if errors:
+        raise SdnnError(errors)
+    loops = analyse_loops(diagram)
+    discrete = discretize(diagram, loops, seed)
+    network = emit_network(diagram, discrete, loops, seed)
+    return Compilation(diagram, loops, discrete, network, tuple(d for d in diagnostics if d.severity != "error"))
+
+
+def compile_file(path: str | Path, seed: int = 0) -> Compilation:
+    return compile_diagram(load_diagram(path), seed)

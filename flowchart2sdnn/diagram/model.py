@@ -1,0 +1,155 @@
+"""The chart IR: frozen dataclasses that know nothing about YAML.
+
+A :class:`Diagram` is what `validate` makes of a chart file and what every later pass reads. Nothing here
+mutates: passes that change a chart (diagnose's effects, identify's learned values) build a new one with
+:func:`dataclasses.replace`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from typing import TYPE_CHECKING
+
+from ..errors import Location
+
+if TYPE_CHECKING:  # pragma: no cover
+    from .expr import Expr
+
+__all__ = [
+    "FORMAT_VERSION",
+    "BLOCK_KINDS",
+    "Signal",
+    "Parameter",
+    "Term",
+    "NonlinearWeights",
+    "Block",
+    "Diagram",
+]
+
+FORMAT_VERSION = 1
+BLOCK_KINDS = ("sum", "gain", "integrator", "delay", "constant", "nonlinear", "function")
+FUNCTIONS = ("tanh", "sin", "cos", "sign_smooth")
+
+
+@dataclass(frozen=True)
+class Signal:
+    """A measured chart signal: an input (excitation) or an output (fitted)."""
+
+    name: str
+    unit: str | None = None
+    description: str | None = None
+    location: Location | None = None
+
+
+@dataclass(frozen=True)
+class Parameter:
+    """A named physical parameter: initial value, unit, bounds and whether it is identified."""
+
+    name: str
+    init: float
+    unit: str | None = None
+    min: float | None = None
+    max: float | None = None
+    fixed: bool = False
+    description: str | None = None
+    location: Location | None = None
+
+
+@dataclass(frozen=True)
+class Term:
+    """One operand of a block: a signal name with the sign it enters with (sums only use -1)."""
+
+    signal: str
+    sign: int = 1
+
+    def __str__(self) -> str:
+        return ("-" if self.sign < 0 else "") + self.signal
+
+
+@dataclass(frozen=True)
+class NonlinearWeights:
+    """Learned weights of a `nonlinear` block: y = sum_i v_i * tanh(a_i * x + b_i)."""
+
+    a: tuple[float, ...]
+    v: tuple[float, ...]
+    b: tuple[float, ...] | None = None
+
+
+@dataclass(frozen=True)
+class Block:
+    """A chart block. Its output signal carries its name. Fields unused by a kind stay None."""
+
+    name: str
+    kind: str
+    inputs: tuple[Term, ...] = ()
+    unit: str | None = None
+    description: str | None = None
+    location: Location | None = None
+    # gain, constant, function: the factor k (an expression of parameters)
+    k: Expr | None = None
+    # integrator: initial value (a number, or "data": the first measured sample of this output)
+    init: float | str | None = None
+    # delay: samples of pure delay
+    n: int | None = None
+    # nonlinear
+    neurons: int | None = None
+    bias: bool | None = None
+    init_range: tuple[float, float] | None = None
+    fixed: bool | None = None
+    weights: NonlinearWeights | None = None
+    # function
+    f: str | None = None
+    eps: float | None = None
+
+    @property
+    def signals_in(self) -> tuple[str, ...]:
+        return tuple(t.signal for t in self.inputs)
+
+
+@dataclass(frozen=True)
+class Diagram:
+    """A validated chart. `file` is the path it came from (for messages); `source_sha256` its hash."""
+
+    name: str
+    sample_time: float
+    inputs: tuple[Signal, ...]
+    outputs: tuple[Signal, ...]
+    parameters: tuple[Parameter, ...]
+    blocks: tuple[Block, ...]
+    description: str | None = None
+    version: int = FORMAT_VERSION
+    file: str = "<chart>"
+    source_sha256: str | None = None
+    extra: dict = field(default_factory=dict, compare=False, hash=False)
+
+    # --- look-ups (cheap; charts are small) ---
+    def block(self, name: str) -> Block:
+        for b in self.blocks:
+            if b.name == name:
+                return b
+        raise KeyError(name)
+
+    def parameter(self, name: str) -> Parameter:
+        for p in self.parameters:
+            if p.name == name:
+                return p
+        raise KeyError(name)
+
+    @property
+    def block_names(self) -> tuple[str, ...]:
+        return tuple(b.name for b in self.blocks)
+
+    @property
+    def input_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.inputs)
+
+    @property
+    def output_names(self) -> tuple[str, ...]:
+        return tuple(s.name for s in self.outputs)
+
+    @property
+    def parameter_names(self) -> tuple[str, ...]:
+        return tuple(p.name for p in self.parameters)
+
+    def parameter_values(self) -> dict[str, float]:
+        return {p.name: p.init for p in self.parameters}

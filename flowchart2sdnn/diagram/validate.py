@@ -1,0 +1,476 @@
+"""Validate a parsed chart (format version 1) and build the :class:`Diagram` IR.
+
+Every problem becomes a :class:`Diagnostic` with the file, the line and the block; all of them are collected
+before failing, so `sdnn lint` can show everything at once. Only structure is checked here (types, kinds,
+names, references); the semantic checks (loops, units, identifiability) live in `analysis.lint`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+import math
+import re
+from collections.abc import Mapping
+from pathlib import Path
+
+from ..errors import Diagnostic, Location, SdnnError, did_you_mean
+from .expr import ExprError, parse_expr
+from .model import (
+    BLOCK_KINDS,
+    FORMAT_VERSION,
+    FUNCTIONS,
+    Block,
+    Diagram,
+    NonlinearWeights,
+    Parameter,
+    Signal,
+    Term,
+)
+from .yamlload import LocatedYaml, load_yaml, parse_yaml_text
+
+__all__ = ["load_diagram", "diagram_from_text", "diagram_from_yaml", "TOP_KEYS", "BLOCK_KEYS"]
+
+NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
+RESERVED = frozenset({"pi", "data", "T"})
+MAX_NEURONS = 100
+MAX_DELAY = 100_000
+
+TOP_KEYS = ("sdnn", "name", "description", "sample_time", "inputs", "outputs", "parameters", "blocks", "identified")
+SIGNAL_KEYS = ("unit", "description")
+PARAM_KEYS = ("init", "unit", "min", "max", "fixed", "description")
+COMMON_BLOCK_KEYS = ("type", "unit", "description")
+BLOCK_KEYS: dict[str, tuple[str, ...]] = {
+    "sum": ("in",),
+    "gain": ("in", "k"),
+    "integrator": ("in", "init"),
+    "delay": ("in", "n"),
+    "constant": ("k",),
+    "nonlinear": ("in", "neurons", "bias", "init_range", "fixed", "weights"),
+    "function": ("in", "f", "k", "eps"),
+}
+
+
+def load_diagram(path: str | Path) -> Diagram:
+    """Read, parse and validate a chart file. Raises SdnnError listing every structural problem."""
+    doc = load_yaml(path)
+    raw = Path(path).read_bytes()
+    return diagram_from_yaml(doc, hashlib.sha256(raw).hexdigest())
+
+
+def diagram_from_text(text: str, name: str = "<chart>") -> Diagram:
+    doc = parse_yaml_text(text, name)
+    return diagram_from_yaml(doc, hashlib.sha256(text.encode()).hexdigest())
+
+
+def diagram_from_yaml(doc: LocatedYaml, sha256: str | None = None) -> Diagram:
+    v = _Validator(doc)
+    diagram = v.run(sha256)
+    errors = [d for d in v.diagnostics if d.severity == "error"]
+    if errors or diagram is None:
+        raise SdnnError(errors or [Diagnostic("CHART000", "error", "invalid chart", Location(doc.file))])
+    return diagram
+
+
+def _is_number(x) -> bool:
+    return isinstance(x, (int, float)) and not isinstance(x, bool)
+
+
+class _Validator:
+    def __init__(self, doc: LocatedYaml):
+        self.doc = doc
+        self.diagnostics: list[Diagnostic] = []
+
+    # -- reporting ---------------------------------------------------------------------------------
+    def error(self, code: str, message: str, path: tuple = (), block: str | None = None, hint=None) -> None:
+        loc = Location(self.doc.file, self.doc.line(*path), self.doc.column(*path))
+        self.diagnostics.append(Diagnostic(code, "error", message, loc, block, hint))
+
+    def loc(self, *path) -> Location:
+        return Location(self.doc.file, self.doc.line(*path), self.doc.column(*path))
+
+    def unknown_keys(self, mapping: Mapping, allowed, path: tuple, what: str, block=None) -> None:
+        for key in mapping:
+            if key not in allowed and not str(key).startswith("x-"):
+                self.error(
+                    "CHART003",
+                    f"unknown key '{key}' in {what}; expected one of: {', '.join(allowed)}",
+                    path + (key,),
+                    block,
+                    did_you_mean(key, allowed),
+                )
+
+    # -- top level ---------------------------------------------------------------------------------
+    def run(self, sha256: str | None) -> Diagram | None:
+        data = self.doc.data
+        if not isinstance(data, dict):
+            self.error("CHART001", f"a chart is a mapping of keys (sdnn, name, blocks, ...), found {_kind(data)}")
+            return None
+        self.unknown_keys(data, TOP_KEYS, (), "the chart")
+        version = data.get("sdnn")
+        if "sdnn" not in data:
+            self.error("CHART002", "missing 'sdnn: 1' (the chart format version)", (), hint="add 'sdnn: 1' on top")
+        elif version != FORMAT_VERSION or isinstance(version, bool):
+            self.error("CHART002", f"unsupported format version {version!r}; this sdnn reads version 1", ("sdnn",))
+        name = data.get("name")
+        if not isinstance(name, str) or not name.strip():
+            self.error("CHART002", f"'name' must be a non-empty string, found {_kind(name)}", ("name",))
+            name = "chart"
+        description = data.get("description")
+        if description is not None and not isinstance(description, str):
+            self.error("CHART004", "'description' must be a string", ("description",))
+            description = None
+        ts = data.get("sample_time")
+        if "sample_time" not in data:
+            self.error("CHART002", "missing 'sample_time' (seconds, e.g. 0.001)", ())
+            ts = 1.0
+        elif not _is_number(ts) or not math.isfinite(ts) or ts <= 0 or ts > 1e6:
+            self.error("CHART004", f"'sample_time' must be a positive number of seconds, found {ts!r}", ("sample_time",))
+            ts = 1.0
+        inputs = self.signals(data.get("inputs"), "inputs")
+        outputs = self.signals(data.get("outputs"), "outputs")
+        parameters = self.parameters(data.get("parameters"))
+        pnames = [p.name for p in parameters]
+        blocks = self.blocks(data.get("blocks"), pnames)
+        if "blocks" not in data:
+            self.error("CHART002", "missing 'blocks' (the chart's blocks)", ())
+        if "inputs" not in data:
+            self.error("CHART002", "missing 'inputs' (the measured excitation signals)", ())
+        if "outputs" not in data:
+            self.error("CHART002", "missing 'outputs' (the measured signals to fit)", ())
+        self.references(inputs, outputs, blocks)
+        if any(d.severity == "error" for d in self.diagnostics):
+            return None
+        return Diagram(
+            name=name.strip(),
+            description=description,
+            sample_time=float(ts),
+            inputs=tuple(inputs),
+            outputs=tuple(outputs),
+            parameters=tuple(parameters),
+            blocks=tuple(blocks),
+            file=self.doc.file,
+            source_sha256=sha256,
+            extra={"identified": data.get("identified")} if "identified" in data else {},
+        )
+
+    def check_name(self, name, path: tuple, what: str) -> bool:
+        if not isinstance(name, str) or not NAME_RE.match(name):
+            self.error(
+                "CHART005",
+                f"{what} name {name!r} is not a valid name (letters, digits, '_', not starting with a digit)",
+                path,
+            )
+            return False
+        if name in RESERVED:
+            self.error("CHART005", f"{what} name '{name}' is reserved", path)
+            return False
+        return True
+
+    def signals(self, section, key: str) -> list[Signal]:
+        if section is None:
+            return []
+        if not isinstance(section, dict):
+            self.error("CHART004", f"'{key}' must be a mapping of signal names, found {_kind(section)}", (key,))
+            return []
+        out = []
+        for name, spec in section.items():
+            path = (key, name)
+            if not self.check_name(name, path, "signal"):
+                continue
+            if spec is None:
+                spec = {}
+            if not isinstance(spec, dict):
+                self.error("CHART004", f"signal '{name}' must be a mapping like {{unit: N*m}}, found {_kind(spec)}", path)
+                continue
+            self.unknown_keys(spec, SIGNAL_KEYS, path, f"signal '{name}'")
+            unit = self.optional_str(spec, "unit", path)
+            desc = self.optional_str(spec, "description", path)
+            out.append(Signal(name, unit, desc, self.loc(*path)))
+        return out
+
+    def optional_str(self, spec: Mapping, key: str, path: tuple, block=None) -> str | None:
+        value = spec.get(key)
+        if value is None:
+            return None
+        if _is_number(value) and key == "unit":
+            return str(value)
+        if not isinstance(value, str):
+            self.error("CHART004", f"'{key}' must be a string, found {_kind(value)}", path + (key,), block)
+            return None
+        return value
+
+    def number(self, spec: Mapping, key: str, path: tuple, block=None, default=None, required=False):
+        if key not in spec or spec[key] is None:
+            if required:
+                self.error("CHART002", f"missing '{key}' (a number)", path, block)
+            return default
+        value = spec[key]
+        if not _is_number(value) or not math.isfinite(value):
+            self.error("CHART004", f"'{key}' must be a finite number, found {value!r}", path + (key,), block)
+            return default
+        return float(value)
+
+    def flag(self, spec: Mapping, key: str, path: tuple, block=None, default=False) -> bool:
+        value = spec.get(key, default)
+        if value is None:
+            return default
+        if not isinstance(value, bool):
+            self.error("CHART004", f"'{key}' must be true or false, found {value!r}", path + (key,), block)
+            return default
+        return value
+
+    # -- parameters --------------------------------------------------------------------------------
+    def parameters(self, section) -> list[Parameter]:
+        if section is None:
+            return []
+        if not isinstance(section, dict):
+            self.error("CHART004", f"'parameters' must be a mapping of names, found {_kind(section)}", ("parameters",))
+            return []
+        out = []
+        for name, spec in section.items():
+            path = ("parameters", name)
+            if not self.check_name(name, path, "parameter"):
+                continue
+            if _is_number(spec):
+                spec = {"init": spec}
+            if not isinstance(spec, dict):
+                self.error("CHART004", f"parameter '{name}' must be a mapping like {{init: 0.1}}, found {_kind(spec)}", path)
+                continue
+            self.unknown_keys(spec, PARAM_KEYS, path, f"parameter '{name}'")
+            init = self.number(spec, "init", path, required=True)
+            lo = self.number(spec, "min", path)
+            hi = self.number(spec, "max", path)
+            out.append(
+                Parameter(
+                    name=name,
+                    init=0.0 if init is None else init,
+                    unit=self.optional_str(spec, "unit", path),
+                    min=lo,
+                    max=hi,
+                    fixed=self.flag(spec, "fixed", path),
+                    description=self.optional_str(spec, "description", path),
+                    location=self.loc(*path),
+                )
+            )
+        return out
+
+    # -- blocks ------------------------------------------------------------------------------------
+    def blocks(self, section, pnames: list[str]) -> list[Block]:
+        if section is None:
+            return []
+        if not isinstance(section, dict):
+            self.error("CHART004", f"'blocks' must be a mapping of block names, found {_kind(section)}", ("blocks",))
+            return []
+        out = []
+        for name, spec in section.items():
+            block = self.block(name, spec, pnames)
+            if block is not None:
+                out.append(block)
+        return out
+
+    def block(self, name, spec, pnames: list[str]) -> Block | None:
+        path = ("blocks", name)
+        if not self.check_name(name, path, "block"):
+            return None
+        if not isinstance(spec, dict):
+            self.error("CHART004", f"block '{name}' must be a mapping like {{type: gain, in: x, k: c}}, "
+                       f"found {_kind(spec)}", path, name)
+            return None
+        kind = spec.get("type")
+        if kind is None:
+            self.error("CHART002", f"missing 'type' (one of: {', '.join(BLOCK_KINDS)})", path, name)
+            return None
+        if kind not in BLOCK_KINDS:
+            self.error("CHART006", f"unknown block type {kind!r}; expected one of: {', '.join(BLOCK_KINDS)}",
+                       path + ("type",), name, did_you_mean(str(kind), BLOCK_KINDS))
+            return None
+        self.unknown_keys(spec, COMMON_BLOCK_KEYS + BLOCK_KEYS[kind], path, f"a {kind} block", name)
+        fields: dict = {
+            "name": name,
+            "kind": kind,
+            "unit": self.optional_str(spec, "unit", path, name),
+            "description": self.optional_str(spec, "description", path, name),
+            "location": self.loc(*path),
+        }
+        if kind == "constant":
+            if "in" in spec:
+                self.error("CHART003", "a constant block takes no 'in'", path + ("in",), name)
+        else:
+            fields["inputs"] = self.terms(spec, path, name, many=(kind == "sum"))
+        if kind in ("gain", "constant"):
+            fields["k"] = self.expression(spec, "k", path, name, pnames, required=True)
+        elif kind == "function":
+            fields["k"] = self.expression(spec, "k", path, name, pnames, required=False)
+            f = spec.get("f")
+            if f not in FUNCTIONS:
+                self.error("CHART004" if "f" in spec else "CHART002",
+                           f"'f' must be one of: {', '.join(FUNCTIONS)}; found {f!r}", path + ("f",), name,
+                           did_you_mean(str(f), FUNCTIONS))
+            fields["f"] = f
+            eps = self.number(spec, "eps", path, name)
+            if eps is not None and eps <= 0:
+                self.error("CHART004", f"'eps' must be positive, found {eps}", path + ("eps",), name)
+            fields["eps"] = eps
+        elif kind == "integrator":
+            init = spec.get("init", 0.0)
+            if init == "data":
+                fields["init"] = "data"
+            elif _is_number(init) and math.isfinite(init):
+                fields["init"] = float(init)
+            else:
+                self.error("CHART004", f"'init' must be a number or 'data', found {init!r}", path + ("init",), name)
+        elif kind == "delay":
+            n = spec.get("n", 1)
+            if not isinstance(n, int) or isinstance(n, bool) or not 1 <= n <= MAX_DELAY:
+                self.error("CHART004", f"'n' must be a whole number of samples from 1 to {MAX_DELAY}, found {n!r}",
+                           path + ("n",), name)
+                n = 1
+            fields["n"] = n
+        elif kind == "nonlinear":
+            self.nonlinear(spec, path, name, fields)
+        return Block(**fields)
+
+    def nonlinear(self, spec: Mapping, path: tuple, name: str, fields: dict) -> None:
+        neurons = spec.get("neurons", 3)
+        if not isinstance(neurons, int) or isinstance(neurons, bool) or not 1 <= neurons <= MAX_NEURONS:
+            self.error("CHART004", f"'neurons' must be a whole number from 1 to {MAX_NEURONS}, found {neurons!r}",
+                       path + ("neurons",), name)
+            neurons = 3
+        fields["neurons"] = neurons
+        fields["bias"] = self.flag(spec, "bias", path, name)
+        fields["fixed"] = self.flag(spec, "fixed", path, name)
+        rng = spec.get("init_range", [-0.5, 0.5])
+        if (
+            not isinstance(rng, list) or len(rng) != 2 or not all(_is_number(x) and math.isfinite(x) for x in rng)
+            or not rng[0] < rng[1]
+        ):
+            self.error("CHART004", f"'init_range' must be [low, high] with low < high, found {rng!r}",
+                       path + ("init_range",), name)
+            rng = [-0.5, 0.5]
+        fields["init_range"] = (float(rng[0]), float(rng[1]))
+        weights = spec.get("weights")
+        if weights is None:
+            return
+        wpath = path + ("weights",)
+        if not isinstance(weights, dict):
+            self.error("CHART004", "'weights' must be a mapping {a: [...], v: [...], b: [...]}", wpath, name)
+            return
+        self.unknown_keys(weights, ("a", "v", "b"), wpath, "nonlinear weights", name)
+        vectors = {}
+        for key in ("a", "v", "b"):
+            if key not in weights:
+                continue
+            vec = weights[key]
+            if (not isinstance(vec, list) or len(vec) != neurons
+                    or not all(_is_number(x) and math.isfinite(x) for x in vec)):
+                self.error("CHART004", f"weights '{key}' must be a list of {neurons} numbers", wpath + (key,), name)
+                return
+            vectors[key] = tuple(float(x) for x in vec)
+        if "a" not in vectors or "v" not in vectors:
+            self.error("CHART002", "nonlinear weights need both 'a' and 'v'", wpath, name)
+            return
+        if "b" in vectors and not fields["bias"]:
+            self.error("CHART004", "weights 'b' given but the block has no bias (set 'bias: true')", wpath + ("b",), name)
+            return
+        if fields["bias"] and "b" not in vectors:
+            vectors["b"] = (0.0,) * neurons
+        fields["weights"] = NonlinearWeights(vectors["a"], vectors["v"], vectors.get("b"))
+
+    def terms(self, spec: Mapping, path: tuple, name: str, many: bool) -> tuple[Term, ...]:
+        if "in" not in spec:
+            self.error("CHART002", "missing 'in' (the input signal" + ("s" if many else "") + ")", path, name)
+            return ()
+        raw = spec["in"]
+        items = raw if isinstance(raw, list) else [raw]
+        if not many and len(items) != 1:
+            self.error("CHART004", f"'in' must be one signal, found a list of {len(items)}; use a sum block to add "
+                       "signals", path + ("in",), name)
+            return ()
+        if many and not items:
+            self.error("CHART004", "'in' must list at least one signal", path + ("in",), name)
+            return ()
+        out = []
+        for i, item in enumerate(items):
+            ipath = path + ("in", i) if isinstance(raw, list) else path + ("in",)
+            if not isinstance(item, str):
+                self.error("CHART004", f"an input must be a signal name like 'x' or '-x', found {_kind(item)}",
+                           ipath, name)
+                continue
+            text = item.strip()
+            sign = 1
+            if text[:1] in "+-":
+                sign = -1 if text[0] == "-" else 1
+                text = text[1:].strip()
+            if not NAME_RE.match(text):
+                self.error("CHART005", f"{item!r} is not a signal name (optionally prefixed by + or -)", ipath, name)
+                continue
+            out.append(Term(text, sign))
+        return tuple(out)
+
+    def expression(self, spec: Mapping, key: str, path: tuple, name: str, pnames: list[str], required: bool):
+        if key not in spec or spec[key] is None:
+            if required:
+                self.error("CHART002", f"missing '{key}' (a number or an expression of parameters)", path, name)
+            return None
+        value = spec[key]
+        if isinstance(value, bool) or not isinstance(value, (int, float, str)):
+            self.error("CHART004", f"'{key}' must be a number or an expression, found {_kind(value)}",
+                       path + (key,), name)
+            return None
+        try:
+            return parse_expr(value, names=pnames)
+        except ExprError as exc:
+            col = self.doc.column(*path, key)
+            if col is not None and exc.column is not None:
+                col = col + exc.column - 1
+            self.diagnostics.append(
+                Diagnostic("CHART007", "error", f"'{key}: {value}': {exc.message}",
+                           Location(self.doc.file, self.doc.line(*path, key), col), name,
+                           getattr(exc, "hint", None))
+            )
+            return None
+
+    # -- references --------------------------------------------------------------------------------
+    def references(self, inputs: list[Signal], outputs: list[Signal], blocks: list[Block]) -> None:
+        input_names = {s.name for s in inputs}
+        block_names = {b.name for b in blocks}
+        for b in blocks:
+            if b.name in input_names:
+                self.error("CHART008", f"signal '{b.name}' is driven twice: it is a chart input and a block",
+                           ("blocks", b.name), b.name, "rename the block or the input")
+        known = input_names | block_names
+        for b in blocks:
+            for i, t in enumerate(b.inputs):
+                if t.signal not in known:
+                    ipath = ("blocks", b.name, "in", i) if len(b.inputs) > 1 else ("blocks", b.name, "in")
+                    self.error("CHART009", f"undefined signal '{t.signal}' (not an input nor a block)", ipath,
+                               b.name, did_you_mean(t.signal, known))
+        for s in outputs:
+            if s.name in input_names:
+                self.error("CHART010", f"output '{s.name}' is a chart input; outputs must be block signals",
+                           ("outputs", s.name))
+            elif s.name not in block_names:
+                self.error("CHART009", f"output '{s.name}' is not a block of the chart", ("outputs", s.name),
+                           hint=did_you_mean(s.name, block_names))
+        if not outputs and "outputs" in (self.doc.data or {}):
+            self.error("CHART002", "a chart needs at least one output", ("outputs",))
+        for b in blocks:
+            if b.kind == "integrator" and b.init == "data" and b.name not in {s.name for s in outputs}:
+                self.error("CHART011", "'init: data' needs the integrator to be a measured output",
+                           ("blocks", b.name, "init"), b.name, "give a number or list the block under 'outputs'")
+
+
+def _kind(value) -> str:
+    if value is None:
+        return "nothing"
+    if isinstance(value, bool):
+        return f"a boolean ({value})"
+    if isinstance(value, dict):
+        return "a mapping"
+    if isinstance(value, list):
+        return "a list"
+    if isinstance(value, str):
+        return f"the text {value[:40]!r}"
+    if _is_number(value):
+        return f"the number {value!r}"
+    return type(value).__name__

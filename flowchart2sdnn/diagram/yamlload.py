@@ -1,0 +1,158 @@
+"""Read a YAML chart safely and remember where every value came from.
+
+PyYAML's safe composer builds a node tree that keeps line and column marks; we turn it into plain Python
+values ourselves so that we can (a) record the line of every key, (b) refuse duplicate keys, which PyYAML
+silently overwrites, and (c) stop alias bombs ("billion laughs") by counting the values we expand.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import yaml
+
+from ..errors import SdnnError
+
+__all__ = ["LocatedYaml", "load_yaml", "parse_yaml_text", "MAX_CHART_BYTES", "MAX_NODES"]
+
+MAX_CHART_BYTES = 1_000_000
+MAX_NODES = 200_000
+MAX_DEPTH = 64
+
+Path_ = tuple  # a path into the document: ("blocks", "MB1", "in", 2)
+
+
+@dataclass(frozen=True)
+class LocatedYaml:
+    """A YAML document as plain values plus the 1-based (line, column) of every path in it."""
+
+    file: str
+    data: object
+    marks: dict = field(default_factory=dict)
+
+    def line(self, *path) -> int | None:
+        """Line of the deepest known prefix of `path` (a missing key reports its parent's line)."""
+        for cut in range(len(path), -1, -1):
+            mark = self.marks.get(tuple(path[:cut]))
+            if mark is not None:
+                return mark[0]
+        return None
+
+    def column(self, *path) -> int | None:
+        mark = self.marks.get(tuple(path))
+        return mark[1] if mark else None
+
+
+def load_yaml(path: str | Path) -> LocatedYaml:
+    """Read and parse a chart file; every failure is an SdnnError naming the file and line."""
+    name = str(path)
+    p = Path(path)
+    try:
+        if p.is_dir():
+            raise SdnnError.at("YAML001", "is a directory, expected a YAML chart file", name)
+        size = p.stat().st_size
+        if size > MAX_CHART_BYTES:
+            raise SdnnError.at(
+                "YAML002", f"file is {size} bytes, more than the {MAX_CHART_BYTES} a chart may have", name
+            )
+        raw = p.read_bytes()
+    except FileNotFoundError:
+        raise SdnnError.at("YAML001", "no such file", name) from None
+    except PermissionError:
+        raise SdnnError.at("YAML001", "permission denied", name) from None
+    except OSError as exc:
+        raise SdnnError.at("YAML001", f"cannot read: {exc.strerror or exc}", name) from None
+    if b"\x00" in raw:
+        raise SdnnError.at("YAML003", "binary file (contains NUL bytes), expected a YAML text file", name)
+    try:
+        text = raw.decode("utf-8-sig")
+    except UnicodeDecodeError as exc:
+        raise SdnnError.at("YAML003", f"not UTF-8 text (bad byte at offset {exc.start})", name) from None
+    return parse_yaml_text(text, name)
+
+
+def parse_yaml_text(text: str, name: str = "<chart>") -> LocatedYaml:
+    if len(text) > MAX_CHART_BYTES:
+        raise SdnnError.at("YAML002", f"chart text longer than {MAX_CHART_BYTES} characters", name)
+    try:
+        nodes = list(yaml.compose_all(text, Loader=yaml.SafeLoader))
+    except yaml.MarkedYAMLError as exc:
+        mark = exc.problem_mark or exc.context_mark
+        line = mark.line + 1 if mark else None
+        col = mark.column + 1 if mark else None
+        problem = exc.problem or exc.context or "invalid YAML"
+        raise SdnnError.at("YAML004", f"invalid YAML: {problem}", name, line, col) from None
+    except yaml.YAMLError as exc:
+        raise SdnnError.at("YAML004", f"invalid YAML: {exc}", name) from None
+    except RecursionError:
+        raise SdnnError.at("YAML005", "nesting too deep", name) from None
+    if len(nodes) > 1:
+        line = nodes[1].start_mark.line + 1 if nodes[1] is not None else None
+        raise SdnnError.at("YAML004", "more than one YAML document ('---'); a chart is one document", name, line)
+    if not nodes or nodes[0] is None:
+        raise SdnnError.at("YAML006", "empty file, expected a chart (a mapping with 'sdnn: 1')", name, 1)
+    builder = _Builder(name)
+    data = builder.build(nodes[0], (), 0)
+    return LocatedYaml(name, data, builder.marks)
+
+
+class _Builder:
+    def __init__(self, name: str):
+        self.name = name
+        self.marks: dict[Path_, tuple[int, int]] = {}
+        self.count = 0
+        self._scalar_loader = yaml.SafeLoader("")
+
+    def build(self, node: yaml.Node, path: Path_, depth: int):
+        self.count += 1
+        line, col = node.start_mark.line + 1, node.start_mark.column + 1
+        if self.count > MAX_NODES:
+            raise SdnnError.at(
+                "YAML005",
+                f"more than {MAX_NODES} values after expanding aliases (an alias bomb?)",
+                self.name,
+                line,
+            )
+        if depth > MAX_DEPTH:
+            raise SdnnError.at("YAML005", f"nesting deeper than {MAX_DEPTH} levels", self.name, line)
+        self.marks.setdefault(path, (line, col))
+        if isinstance(node, yaml.MappingNode):
+            out: dict = {}
+            for key_node, value_node in node.value:
+                if not isinstance(key_node, yaml.ScalarNode):
+                    raise SdnnError.at(
+                        "YAML007", "a mapping key must be a plain name", self.name, key_node.start_mark.line + 1
+                    )
+                if key_node.tag == "tag:yaml.org,2002:merge":
+                    raise SdnnError.at(
+                        "YAML007", "merge keys ('<<') are not supported in charts", self.name,
+                        key_node.start_mark.line + 1,
+                    )
+                key = self._scalar(key_node)
+                if not isinstance(key, (str, int, float, bool)) or key is None:
+                    key = str(key)
+                key = str(key) if not isinstance(key, str) else key
+                key_line = key_node.start_mark.line + 1
+                if key in out:
+                    first = self.marks.get(path + (key,), (None,))[0]
+                    raise SdnnError.at(
+                        "YAML008",
+                        f"duplicate key '{key}' (first defined on line {first})",
+                        self.name,
+                        key_line,
+                        key_node.start_mark.column + 1,
+                    )
+                self.marks[path + (key,)] = (key_line, key_node.start_mark.column + 1)
+                out[key] = self.build(value_node, path + (key,), depth + 1)
+            return out
+        if isinstance(node, yaml.SequenceNode):
+            return [self.build(item, path + (i,), depth + 1) for i, item in enumerate(node.value)]
+        return self._scalar(node)
+
+    def _scalar(self, node: yaml.ScalarNode):
+        try:
+            return self._scalar_loader.construct_object(node, deep=True)
+        except (yaml.YAMLError, ValueError, OverflowError):
+            # e.g. an explicit tag PyYAML's safe loader does not know: keep the text, validation says what it expected
+            return str(node.value)

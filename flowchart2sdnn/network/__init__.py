@@ -1,0 +1,1 @@
+"""The network file and its runtime (simulation and RTRL Jacobian)."""
