@@ -8,6 +8,7 @@ from __future__ import annotations
 import functools
 import json
 import sys
+
 import click
 
 from . import __version__

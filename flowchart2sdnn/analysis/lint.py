@@ -198,40 +198,71 @@ def _identifiability(diagram: Diagram):
     """Structural check: the map (free parameters) -> (gain values) must have full rank.
 
     Two parameters that only ever appear together (a product J*r, a ratio c/k) give proportional columns of
-    d(gains)/d(parameters); no data can tell them apart. Learned curves behind a gain (k * v_i) are included.
+    d(gains)/d(parameters); no data can tell them apart. The Jacobian is sparse (a gain names a few
+    parameters), so it is split into groups of parameters linked by shared gains and each group is checked
+    on its own: a chart of 1000 masses has 3000 parameters, and one dense SVD of that size takes seconds.
     """
     free = [p for p in diagram.parameters if not p.fixed]
     if len(free) < 2:
         return
+    index = {p.name: j for j, p in enumerate(free)}
     env = diagram.parameter_values()
-    exprs: list[Expr] = [b.k for b in diagram.blocks if b.k is not None and not b.k.is_constant]
-    if not exprs:
-        return
-    cols = []
-    for p in free:
-        col = []
-        for e in exprs:
+    rows: list[dict[int, float]] = []
+    for b in diagram.blocks:
+        if b.k is None:
+            continue
+        row: dict[int, float] = {}
+        for name in sorted(b.k.variables & index.keys()):
             try:
-                col.append(e.diff(p.name).evaluate(env) * (abs(p.init) or 1.0))
+                row[index[name]] = b.k.diff(name).evaluate(env) * (abs(env[name]) or 1.0)
             except Exception:  # noqa: BLE001 - a singular point: skip the check rather than guess
                 return
-        cols.append(col)
-    d = np.array(cols).T
-    if not np.all(np.isfinite(d)):
+        if row:
+            rows.append(row)
+    parent = list(range(len(free)))  # union-find: parameters that share a gain
+
+    def root(j: int) -> int:
+        while parent[j] != j:
+            parent[j] = parent[parent[j]]
+            j = parent[j]
+        return j
+
+    for row in rows:
+        first, *rest = row
+        for j in rest:
+            parent[root(j)] = root(first)
+    groups: dict[int, list[int]] = {}
+    for j in range(len(free)):
+        groups.setdefault(root(j), []).append(j)
+    group_rows: dict[int, list[dict[int, float]]] = {}
+    for row in rows:
+        group_rows.setdefault(root(next(iter(row))), []).append(row)
+    for r, members in sorted(groups.items(), key=lambda kv: kv[1][0]):
+        if len(members) < 2:
+            continue
+        yield from _rank_deficient(free, members, group_rows.get(r, []), diagram)
+
+
+def _rank_deficient(free, members: list[int], rows: list[dict[int, float]], diagram: Diagram):
+    col = {j: i for i, j in enumerate(members)}
+    d = np.zeros((len(rows), len(members)))
+    for i, row in enumerate(rows):
+        for j, value in row.items():
+            d[i, col[j]] = value
+    if d.size == 0 or not np.all(np.isfinite(d)):
         return
     # scale rows so each gain counts equally
     norms = np.linalg.norm(d, axis=1, keepdims=True)
     norms[norms == 0] = 1.0
     d = d / norms
     _, s, vt = np.linalg.svd(d)
-    if s.size == 0:
-        return
-    for i in range(len(free)):
+    for i in range(len(members)):
         sv = s[i] if i < len(s) else 0.0
         if sv <= 1e-9 * max(s[0], 1e-300):
-            names = [free[j].name for j in np.flatnonzero(np.abs(vt[i]) > 1e-6)]
+            names = [free[members[j]].name for j in np.flatnonzero(np.abs(vt[i]) > 1e-6)]
             if len(names) >= 2:
                 yield Diagnostic(
                     "LINT007", "warning",
                     f"parameters {', '.join(names)} only appear together and cannot be identified separately",
-                    _loc(diagram, free[0]), hint=f"fix all but one of {', '.join(names)} (fixed: true)")
+                    _loc(diagram, diagram.parameter(names[0])), hint=f"fix all but one of {', '.join(names)} "
+                    "(fixed: true)")

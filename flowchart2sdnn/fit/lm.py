@@ -1,0 +1,443 @@
+"""Levenberg-Marquardt on the squared error (paper eqs. 4 and 11) with the ``trainlm`` damping schedule.
+
+The trainer is generic: it sees a callback ``fun(x) -> (e, J)`` returning the residual ``e = y - yhat``
+(shape (M,)) and the model Jacobian ``J = d yhat / d x`` (shape (M, P)), never a network.  With
+``de/dx = -J`` the step of eq. (11) reads, in the internal (unbounded) coordinates ``u`` of
+:mod:`flowchart2sdnn.fit.transforms`,
+
+    (J_u^T J_u + mu I) du = J_u^T e,      J_u = J * dx/du,      cost E = 1/2 e^T e.
+
+A trial step is accepted only if it lowers the cost (then ``mu *= mu_dec``); otherwise ``mu *= mu_inc``
+and the step is recomputed.  A trial whose simulation diverges (``fun`` returns None, non-finite
+values, or raises FloatingPointError/OverflowError) or that ``guard`` refuses is rejected the same way,
+so the result never holds NaN.
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq
+
+from .transforms import Bounds
+
+__all__ = ["LMOptions", "LMResult", "levenberg_marquardt", "STATUS_MESSAGES", "CONVERGED_STATUSES"]
+
+#: Status code -> message (scipy style).  ``LMResult.message`` starts with one of these.
+STATUS_MESSAGES: dict[str, str] = {
+    "diverged_at_start": "the model diverged (no finite output) at the start values; choose other start values",
+    "min_grad": "the gradient norm fell below `min_grad`",
+    "cost_goal": "the cost reached `cost_goal`",
+    "max_iter": "the iteration limit `max_iter` was reached",
+    "mu_max": "mu exceeded `mu_max`: no damped step lowers the cost (a local minimum, or rejected steps)",
+    "max_mu_tries": "`max_mu_tries` increases of mu in a row did not find a step that lowers the cost",
+    "small_step": "the relative step fell below `min_rel_step`",
+    "small_cost_change": "the relative decrease of the cost fell below `min_rel_cost_change`",
+    "callback_stop": "stopped by the callback",
+    "interrupted": "interrupted (KeyboardInterrupt); the best point so far is returned",
+}
+
+#: Statuses that mean "a (local) minimum was reached" rather than "stopped early".
+CONVERGED_STATUSES = frozenset({"min_grad", "cost_goal", "mu_max", "small_step", "small_cost_change"})
+
+
+@dataclass(frozen=True)
+class LMOptions:
+    """Settings of :func:`levenberg_marquardt` (names and defaults follow MATLAB's ``trainlm``).
+
+    ``mu_min`` keeps mu from underflowing after a long run of accepted steps, so that a later rejection
+    can raise it back to a useful size within ``max_mu_tries`` tries.
+    """
+
+    max_iter: int = 100
+    mu0: float = 1e-3
+    mu_inc: float = 10.0
+    mu_dec: float = 0.1
+    mu_max: float = 1e10
+    min_grad: float = 1e-10
+    cost_goal: float = 0.0
+    min_rel_step: float = 1e-12
+    min_rel_cost_change: float = 0.0
+    max_mu_tries: int = 20
+    mu_min: float = 1e-20
+
+    def __post_init__(self) -> None:
+        def need(cond: bool, text: str) -> None:
+            if not cond:
+                raise ValueError(text)
+
+        for name in (
+            "mu0",
+            "mu_inc",
+            "mu_dec",
+            "mu_max",
+            "min_grad",
+            "cost_goal",
+            "min_rel_step",
+            "min_rel_cost_change",
+            "mu_min",
+        ):
+            need(math.isfinite(getattr(self, name)), f"`{name}` must be finite, got {getattr(self, name)}")
+        need(
+            isinstance(self.max_iter, int) and self.max_iter >= 0,
+            f"`max_iter` must be an int >= 0, got {self.max_iter!r}",
+        )
+        need(
+            isinstance(self.max_mu_tries, int) and self.max_mu_tries >= 1,
+            f"`max_mu_tries` must be an int >= 1, got {self.max_mu_tries!r}",
+        )
+        need(0 < self.mu_min <= self.mu0 <= self.mu_max, "need 0 < `mu_min` <= `mu0` <= `mu_max`")
+        need(self.mu_inc > 1, f"`mu_inc` must be > 1, got {self.mu_inc}")
+        need(0 < self.mu_dec < 1, f"`mu_dec` must be in (0, 1), got {self.mu_dec}")
+        for name in ("min_grad", "cost_goal", "min_rel_step", "min_rel_cost_change"):
+            need(getattr(self, name) >= 0, f"`{name}` must be >= 0, got {getattr(self, name)}")
+
+
+@dataclass(frozen=True, eq=False)
+class LMResult:
+    """Outcome of :func:`levenberg_marquardt`; arrays are read-only.
+
+    Attributes
+    ----------
+    x : ndarray (P,)            final (best) values, external coordinates
+    cost : float                E = 1/2 e^T e at ``x`` (inf only for "diverged_at_start")
+    status, message : str       a key of ``STATUS_MESSAGES`` and a sentence with details
+    iterations : int            accepted steps
+    cost_history, mu_history : tuple of float, length iterations + 1 (start value, then after each step)
+    jac : ndarray (M, P)        last model Jacobian d yhat / d x at ``x`` (external coordinates)
+    residual : ndarray (M,)     e = y - yhat at ``x``
+    nfev, njev : int            residual and Jacobian evaluations
+    interrupted : bool          True after a KeyboardInterrupt
+    names : tuple of str        quantity names
+    mu : float                  damping when the run stopped (may exceed ``mu_max``); a quasi-online
+                                caller can start the next window from it
+    rejected_cost, rejected_diverged, rejected_guard : int   trial steps rejected, by reason
+    last_guard_reason : str or None                          the guard's last refusal
+    """
+
+    x: np.ndarray
+    cost: float
+    status: str
+    message: str
+    iterations: int
+    cost_history: tuple[float, ...]
+    mu_history: tuple[float, ...]
+    jac: np.ndarray
+    residual: np.ndarray
+    nfev: int
+    njev: int
+    interrupted: bool = False
+    names: tuple[str, ...] = ()
+    mu: float = math.nan
+    rejected_cost: int = 0
+    rejected_diverged: int = 0
+    rejected_guard: int = 0
+    last_guard_reason: str | None = None
+
+    @property
+    def converged(self) -> bool:
+        """True when a stopping rule of ``CONVERGED_STATUSES`` ended the run."""
+        return self.status in CONVERGED_STATUSES
+
+
+# ---------------------------------------------------------------------------------------------- helpers
+@dataclass(frozen=True)
+class _Point:
+    u: np.ndarray
+    x: np.ndarray
+    e: np.ndarray
+    J: np.ndarray
+    cost: float
+
+
+@dataclass
+class _Counters:
+    nfev: int = 0
+    njev: int = 0
+    rejected_cost: int = 0
+    rejected_diverged: int = 0
+    rejected_guard: int = 0
+    last_guard_reason: str | None = None
+    m: int | None = field(default=None)
+
+
+def _cost(e: np.ndarray) -> float:
+    with np.errstate(over="ignore", invalid="ignore"):
+        return 0.5 * float(e @ e)
+
+
+def _check_e(e, counters: _Counters) -> np.ndarray | None:
+    if e is None:
+        return None
+    e = np.array(e, dtype=float)
+    if e.ndim != 1 or e.size == 0:
+        raise ValueError(f"the residual must have shape (M,) with M >= 1, got shape {e.shape}")
+    if counters.m is None:
+        counters.m = e.size
+    elif e.size != counters.m:
+        raise ValueError(f"the residual changed length from {counters.m} to {e.size} between calls")
+    return e if np.all(np.isfinite(e)) else None
+
+
+def _call_fun(fun, x, n_params, counters) -> tuple[np.ndarray, np.ndarray] | None:
+    """fun(x) -> (e, J) validated; None when the simulation diverged."""
+    counters.nfev += 1
+    counters.njev += 1
+    try:
+        out = fun(x.copy())
+    except (FloatingPointError, OverflowError):  # the model blew up at this x
+        return None
+    if out is None:
+        return None
+    e, J = out
+    e = _check_e(e, counters)
+    if e is None or J is None:
+        return None
+    J = np.array(J, dtype=float)
+    if J.shape != (e.size, n_params):
+        raise ValueError(f"the Jacobian must have shape (M, P) = ({e.size}, {n_params}), got {J.shape}")
+    if not np.all(np.isfinite(J)) or not math.isfinite(_cost(e)):
+        return None
+    return e, J
+
+
+def _call_residual(residual, x, counters) -> np.ndarray | None:
+    counters.nfev += 1
+    try:
+        e = _check_e(residual(x.copy()), counters)
+    except (FloatingPointError, OverflowError):
+        return None
+    if e is None or not math.isfinite(_cost(e)):
+        return None
+    return e
+
+
+def _damped_step(Ju: np.ndarray, e: np.ndarray, A: np.ndarray, g: np.ndarray, mu: float) -> np.ndarray:
+    """Solve (A + mu I) du = g with A = Ju^T Ju, g = Ju^T e.
+
+    Cholesky first; if the matrix is not numerically positive definite, the least-squares solution of the
+    augmented system [Ju; sqrt(mu) I] du = [e; 0] (same normal equations, better conditioned).
+    """
+    n = A.shape[0]
+    try:
+        factor = cho_factor(A + mu * np.eye(n), check_finite=False)
+        du = cho_solve(factor, g, check_finite=False)
+        if np.all(np.isfinite(du)):
+            return du
+    except LinAlgError:
+        pass
+    aug = np.vstack([Ju, math.sqrt(mu) * np.eye(n)])
+    rhs = np.concatenate([e, np.zeros(n)])
+    return lstsq(aug, rhs, check_finite=False)[0]
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a = np.array(a, dtype=float)
+    a.setflags(write=False)
+    return a
+
+
+# ---------------------------------------------------------------------------------------------- front door
+def levenberg_marquardt(
+    fun: Callable[[np.ndarray], tuple[np.ndarray, np.ndarray] | None],
+    x0: Sequence[float] | np.ndarray,
+    names: Sequence[str],
+    lower: Sequence[float] | np.ndarray | float | None = None,
+    upper: Sequence[float] | np.ndarray | float | None = None,
+    options: LMOptions = LMOptions(),
+    callback: Callable[[int, np.ndarray, float, float], bool | None] | None = None,
+    guard: Callable[[np.ndarray], str | None] | None = None,
+    residual: Callable[[np.ndarray], np.ndarray | None] | None = None,
+) -> LMResult:
+    """Minimise E(x) = 1/2 sum e(x)^2 by Levenberg-Marquardt within bounds.
+
+    Parameters
+    ----------
+    fun : callable ``fun(x) -> (e, J)``
+        ``x`` (P,) external values; ``e`` (M,) residual y - yhat; ``J`` (M, P) = d yhat / d x.  Returning
+        None, non-finite values, or raising FloatingPointError/OverflowError means "the model diverged":
+        that trial step is rejected.  Other exceptions propagate.
+    x0 : array_like (P,)
+        Start values, inside ``[lower, upper]`` (a value on a bound is allowed).
+    names : sequence of str (P,)
+        Quantity names for messages.
+    lower, upper : array_like (P,), scalar or None
+        Bounds, ``-inf``/``inf``/None for none; enforced by a transform, never by clipping.
+    options : LMOptions
+    callback : callable ``callback(iteration, x, cost, mu) -> bool | None``, optional
+        Called after each accepted step; returning True stops with status "callback_stop".
+    guard : callable ``guard(x) -> str | None``, optional
+        Called on each trial x before simulating it; a string rejects the trial (mu is increased) and is
+        kept as ``last_guard_reason``.  The start ``x0`` is not checked.
+    residual : callable ``residual(x) -> e | None``, optional
+        A cheaper residual-only model: when given, trial steps are evaluated with it and ``fun`` is called
+        only at accepted points (for the Jacobian), as ``trainlm`` does.
+
+    Returns
+    -------
+    LMResult
+        The best point found; ``x`` is finite and within bounds whatever the status.
+    """
+    x0 = np.array(x0, dtype=float)
+    if x0.ndim != 1 or x0.size == 0:
+        raise ValueError(f"`x0` must be a non-empty 1-D array, got shape {x0.shape}")
+    names = tuple(str(n) for n in names)
+    if len(names) != x0.size:
+        raise ValueError(f"`names` has {len(names)} entries, `x0` has {x0.size}")
+    if len(set(names)) != len(names):
+        dup = sorted({n for n in names if names.count(n) > 1})
+        raise ValueError(f"`names` are not unique: {', '.join(dup)}")
+    bounds = Bounds.make(names, lower, upper)
+    bounds.check(x0)
+    if not isinstance(options, LMOptions):
+        raise TypeError(f"`options` must be an LMOptions, got {type(options).__name__}")
+    opt = options
+    n_params = x0.size
+    counters = _Counters()
+
+    u = bounds.start(x0)
+    x = bounds.to_external(u)
+    first = _call_fun(fun, x, n_params, counters)
+    if first is None:
+        return LMResult(
+            x=_readonly(x0),
+            cost=math.inf,
+            status="diverged_at_start",
+            message=STATUS_MESSAGES["diverged_at_start"],
+            iterations=0,
+            cost_history=(),
+            mu_history=(),
+            jac=_readonly(np.zeros((0, n_params))),
+            residual=_readonly(np.zeros(0)),
+            nfev=counters.nfev,
+            njev=counters.njev,
+            names=names,
+            mu=opt.mu0,
+        )
+    point = _Point(u, x, first[0], first[1], _cost(first[0]))
+    # One object holds the whole state so that a KeyboardInterrupt can never leave it half-updated.
+    state = (point, opt.mu0, (point.cost,), (opt.mu0,))
+    status, detail = None, ""
+    try:
+        while True:
+            point, mu, costs, mus = state
+            iteration = len(costs) - 1
+            if point.cost <= opt.cost_goal:
+                status = "cost_goal"
+                break
+            Ju = point.J * bounds.dx_du(point.u)
+            g = Ju.T @ point.e  # = -dE/du
+            gnorm = float(np.linalg.norm(g))
+            if gnorm < opt.min_grad:
+                status, detail = "min_grad", f"|grad| = {gnorm:.3g}"
+                break
+            if iteration >= opt.max_iter:
+                status = "max_iter"
+                break
+            if mu > opt.mu_max:
+                status = "mu_max"
+                break
+            status, new_point, mu, tiny = _inner(
+                fun, residual, guard, bounds, point, Ju, g, mu, opt, counters
+            )
+            if new_point is not None:
+                rel_decrease = (point.cost - new_point.cost) / point.cost if point.cost > 0 else 0.0
+                mu = max(mu * opt.mu_dec, opt.mu_min)
+                state = (new_point, mu, costs + (new_point.cost,), mus + (mu,))
+                if tiny:
+                    status = "small_step"
+                elif 0 < opt.min_rel_cost_change and rel_decrease < opt.min_rel_cost_change:
+                    status, detail = "small_cost_change", f"relative decrease {rel_decrease:.3g}"
+                if callback is not None and status is None:
+                    if callback(iteration + 1, new_point.x.copy(), new_point.cost, mu):
+                        status = "callback_stop"
+            else:
+                state = (point, mu, costs, mus)
+            if status is not None:
+                break
+        interrupted = False
+    except KeyboardInterrupt:
+        status, interrupted = "interrupted", True
+
+    point, mu, costs, mus = state
+    iteration = len(costs) - 1
+    message = f"{STATUS_MESSAGES[status]} (iteration {iteration}, cost {point.cost:.6g}, mu {mu:.3g}"
+    message += f", {detail})" if detail else ")"
+    if counters.last_guard_reason is not None and status in ("mu_max", "max_mu_tries"):
+        message += f"; last step refused by the guard: {counters.last_guard_reason}"
+    return LMResult(
+        x=_readonly(point.x),
+        cost=point.cost,
+        status=status,
+        message=message,
+        iterations=iteration,
+        cost_history=tuple(float(c) for c in costs),
+        mu_history=tuple(float(m) for m in mus),
+        jac=_readonly(point.J),
+        residual=_readonly(point.e),
+        nfev=counters.nfev,
+        njev=counters.njev,
+        interrupted=interrupted,
+        names=names,
+        mu=float(mu),
+        rejected_cost=counters.rejected_cost,
+        rejected_diverged=counters.rejected_diverged,
+        rejected_guard=counters.rejected_guard,
+        last_guard_reason=counters.last_guard_reason,
+    )
+
+
+def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float, opt: LMOptions, counters):
+    """Raise mu until a trial step lowers the cost.
+
+    Returns (status or None, accepted point or None, mu, tiny step flag).
+    """
+    A = Ju.T @ Ju
+    x_norm = float(np.linalg.norm(point.x))
+    for _ in range(opt.max_mu_tries):
+        du = _damped_step(Ju, point.e, A, g, mu)
+        u_t = point.u + du
+        x_t = bounds.to_external(u_t)
+        tiny = float(np.linalg.norm(x_t - point.x)) <= opt.min_rel_step * (opt.min_rel_step + x_norm)
+        trial = _try(fun, residual, guard, u_t, x_t, point.cost, counters)
+        if trial is not None:
+            return None, trial, mu, tiny
+        if tiny:  # the cost no longer decreases along steps at rounding level: converged
+            return "small_step", None, mu, tiny
+        mu *= opt.mu_inc
+        if mu > opt.mu_max:
+            return "mu_max", None, mu, tiny
+    return "max_mu_tries", None, mu, False
+
+
+def _try(fun, residual, guard, u_t, x_t, cost, counters: _Counters) -> _Point | None:
+    """Evaluate one trial; the accepted point, or None (rejected, counted by reason)."""
+    if not np.all(np.isfinite(x_t)):  # a wild step (huge u) on an unbounded quantity
+        counters.rejected_diverged += 1
+        return None
+    if guard is not None:
+        reason = guard(x_t.copy())
+        if reason:
+            counters.rejected_guard += 1
+            counters.last_guard_reason = str(reason)
+            return None
+    if residual is not None:
+        e_t = _call_residual(residual, x_t, counters)
+        if e_t is None:
+            counters.rejected_diverged += 1
+            return None
+        if not _cost(e_t) < cost:
+            counters.rejected_cost += 1
+            return None
+    out = _call_fun(fun, x_t, u_t.size, counters)
+    if out is None:
+        counters.rejected_diverged += 1
+        return None
+    cost_t = _cost(out[0])
+    if not cost_t < cost:
+        counters.rejected_cost += 1
+        return None
+    return _Point(u_t, x_t, out[0], out[1], cost_t)

@@ -1,0 +1,178 @@
+"""Numba kernels: GDNN simulation (eq. 1-2 of the paper) and RTRL forward sensitivities.
+
+Both kernels walk the flat arrays of :mod:`.flat`: at each time t, neurons in global order, each neuron over
+its incoming connections. Past outputs live in a ring buffer of length ``ring = max delay + 1`` whose slots
+start filled with the history, so ``a(t - d)`` for ``t - d < 0`` reads the initial state without a branch
+(slot ``(t - d) mod ring`` is first written at time ``t - d + ring > t``). Inputs before t = 0 are held at
+``p(0)``.
+
+RTRL (Williams & Zipser 1989; De Jesús & Hagan 2007, written per neuron instead of per layer): with
+``S_k(t) = d a_k(t) / d theta`` (a row of length P),
+
+    dn_k/dtheta = sum_c w_c S_src(c)(t - d_c)            [neuron sources]
+                + sum_c x_c(t - d_c) dw_c/dtheta         [sparse: only the theta a connection depends on]
+    S_k(t)      = f'(n_k(t)) dn_k/dtheta
+
+The history does not depend on theta, so its sensitivities are zero. S is kept in a ring buffer too, so memory
+does not grow with Q except for the (Q, n_out, P) result. The kernels never raise on non-finite values: they
+propagate, and the caller checks ``np.isfinite``.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+__all__ = ["simulate_kernel", "jacobian_kernel"]
+
+
+@numba.njit(cache=True, inline="always")
+def _transfer(code, n):
+    if code == 0:
+        return n
+    if code == 1:
+        return math.tanh(n)
+    if code == 2:
+        return math.sin(n)
+    return math.cos(n)
+
+
+@numba.njit(cache=True, inline="always")
+def _slope(code, n, a):
+    """f'(n), given a = f(n)."""
+    if code == 0:
+        return 1.0
+    if code == 1:
+        return 1.0 - a * a
+    if code == 2:
+        return math.cos(n)
+    return -math.sin(n)
+
+
+@numba.njit(cache=True)
+def simulate_kernel(
+    inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, history, ring, record
+):
+    """Simulate the network; return the outputs of the neurons `record` over time, shape (Q, len(record)).
+
+    inputs (Q, R) float64; conn_* and transfer int64 (see :class:`.flat.FlatNetwork`); conn_val (C,) float64;
+    history (N,) float64; ring int; record (K,) int64 global neuron indices.
+    """
+    n_steps = inputs.shape[0]
+    n_neurons = transfer.shape[0]
+    out = np.empty((n_steps, record.shape[0]))
+    a_buf = np.empty((ring, n_neurons))
+    for s in range(ring):
+        for k in range(n_neurons):
+            a_buf[s, k] = history[k]
+    slot_of = np.empty(
+        ring, dtype=np.int64
+    )  # slot of a(t - d), refreshed each step: no modulo per connection
+    for t in range(n_steps):
+        slot = t % ring
+        for d in range(ring):
+            slot_of[d] = (t - d + ring) % ring
+        for k in range(n_neurons):
+            n = 0.0
+            for c in range(conn_ptr[k], conn_ptr[k + 1]):
+                kind = conn_kind[c]
+                d = conn_delay[c]
+                if kind == 0:
+                    x = a_buf[slot_of[d], conn_src[c]]
+                elif kind == 1:
+                    x = inputs[max(t - d, 0), conn_src[c]]
+                else:
+                    x = 1.0
+                n += conn_val[c] * x
+            a_buf[slot, k] = _transfer(transfer[k], n)
+        for o in range(record.shape[0]):
+            out[t, o] = a_buf[slot, record[o]]
+    return out
+
+
+@numba.njit(cache=True)
+def jacobian_kernel(
+    inputs,
+    conn_ptr,
+    conn_kind,
+    conn_src,
+    conn_delay,
+    conn_val,
+    dptr,
+    dtheta,
+    dval,
+    transfer,
+    history,
+    ring,
+    record,
+    n_theta,
+):
+    """Outputs and their exact derivatives by RTRL.
+
+    Extra arguments beyond :func:`simulate_kernel`: the sparse dw/dtheta of each connection in CSR form --
+    entries ``dptr[c]:dptr[c + 1]`` of ``dtheta`` (theta index, int64) and ``dval`` (value, float64) -- and
+    ``n_theta`` = P.
+
+    Returns
+    -------
+    y : (Q, K) float64
+    dy : (Q, K, P) float64
+    """
+    n_steps = inputs.shape[0]
+    n_neurons = transfer.shape[0]
+    n_rec = record.shape[0]
+    y = np.empty((n_steps, n_rec))
+    dy = np.empty((n_steps, n_rec, n_theta))
+    a_buf = np.empty((ring, n_neurons))
+    for s in range(ring):
+        for k in range(n_neurons):
+            a_buf[s, k] = history[k]
+    s_buf = np.zeros((ring, n_neurons, n_theta))
+    dn = np.empty(n_theta)
+    slot_of = np.empty(
+        ring, dtype=np.int64
+    )  # slot of a(t - d), refreshed each step: no modulo per connection
+    for t in range(n_steps):
+        slot = t % ring
+        for d in range(ring):
+            slot_of[d] = (t - d + ring) % ring
+        for k in range(n_neurons):
+            n = 0.0
+            for p in range(n_theta):
+                dn[p] = 0.0
+            for c in range(conn_ptr[k], conn_ptr[k + 1]):
+                kind = conn_kind[c]
+                d = conn_delay[c]
+                w = conn_val[c]
+                if kind == 0:
+                    src_slot = slot_of[d]
+                    src = conn_src[c]
+                    x = a_buf[src_slot, src]
+                    # before t = 0 the source is history, whose sensitivity is zero
+                    if t - d >= 0 and w != 0.0:
+                        s_src = s_buf[src_slot, src]
+                        for p in range(n_theta):
+                            dn[p] += w * s_src[p]
+                elif kind == 1:
+                    x = inputs[max(t - d, 0), conn_src[c]]
+                else:
+                    x = 1.0
+                n += w * x
+                for e in range(dptr[c], dptr[c + 1]):
+                    dn[dtheta[e]] += x * dval[e]
+            code = transfer[k]
+            a = _transfer(code, n)
+            a_buf[slot, k] = a
+            g = _slope(code, n, a)
+            s_k = s_buf[slot, k]
+            for p in range(n_theta):
+                s_k[p] = g * dn[p]
+        for o in range(n_rec):
+            r = record[o]
+            y[t, o] = a_buf[slot, r]
+            s_r = s_buf[slot, r]
+            for p in range(n_theta):
+                dy[t, o, p] = s_r[p]
+    return y, dy

@@ -1,0 +1,286 @@
+"""Run a :class:`Network`: simulation and the exact Jacobian of its outputs by RTRL.
+
+theta, the vector the trainer moves, holds the free quantities: by default the non-fixed physical parameters
+(``net.parameters`` order) followed by the non-fixed free weights (``net.free_weights`` order). Every weight is
+``w_j = coef_j(parameters) * (free weight or 1)``, so by the chain rule
+
+    dw_j/dp = (d coef_j / dp)(parameters) * (free weight or 1)     for a parameter p,
+    dw_j/df = coef_j(parameters)                                   for the free weight f of w_j.
+
+The symbolic derivatives are taken once here; each call evaluates them into a sparse (connection, theta,
+value) list that the kernel of :mod:`.kernels` consumes.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+
+import numpy as np
+
+from ..diagram.expr import parse_expr
+from .flat import FlatNetwork, flatten, signal_names
+from .kernels import jacobian_kernel, simulate_kernel
+from .model import Network
+
+__all__ = ["CompiledNetwork"]
+
+
+def _evaluate(expr, env: Mapping[str, float]) -> float:
+    """Evaluate an expression; arithmetic failures (J = 0 in 1/J) give NaN so the trainer can reject the step."""
+    try:
+        return float(expr.evaluate(env))
+    except (ArithmeticError, ValueError):
+        return float("nan")
+
+
+class CompiledNetwork:
+    """A network ready to simulate and differentiate.
+
+    Parameters
+    ----------
+    net : Network
+        The network file.
+    free : sequence of str, optional
+        Names of the quantities to put in theta (parameters and/or free weights, none fixed). Default: every
+        non-fixed parameter, then every non-fixed free weight.
+
+    Attributes
+    ----------
+    net : Network
+    names : tuple of str
+        theta order.
+    n_inputs, n_outputs : int
+    input_names, output_names : tuple of str
+    """
+
+    def __init__(self, net: Network, free: Sequence[str] | None = None) -> None:
+        self.net = net
+        self._flat: FlatNetwork = flatten(net)
+        self.n_inputs = len(net.inputs)
+        self.n_outputs = len(net.outputs)
+        self.input_names = tuple(i.name for i in net.inputs)
+        self.output_names = tuple(o.name for o in net.outputs)
+        self._signal_names = signal_names(net)
+        self.names = self._theta_names(free)
+        self._param_names = {p.name for p in net.parameters}
+        self._theta_param = {n: i for i, n in enumerate(self.names) if n in self._param_names}
+        self._theta_free = {n: i for i, n in enumerate(self.names) if n not in self._param_names}
+        self._build_expressions()
+        self._build_derivatives()
+
+    # ------------------------------------------------------------------ construction
+    def _theta_names(self, free: Sequence[str] | None) -> tuple[str, ...]:
+        net = self.net
+        params = {p.name: p for p in net.parameters}
+        weights = {f.name: f for f in net.free_weights}
+        if free is None:
+            names = [p.name for p in net.parameters if not p.fixed]
+            names += [f.name for f in net.free_weights if not f.fixed]
+        else:
+            if isinstance(free, str):
+                raise ValueError("`free` must be a sequence of names, not a single string")
+            names = list(free)
+            if len(set(names)) != len(names):
+                raise ValueError(f"`free` lists a name twice: {names}")
+            for name in names:
+                spec = params.get(name) or weights.get(name)
+                if spec is None:
+                    raise ValueError(
+                        f"`free`: {name!r} is neither a parameter nor a free weight of {net.name!r}"
+                    )
+                if spec.fixed:
+                    raise ValueError(f"`free`: {name!r} is fixed and cannot be differentiated")
+        for name in names:
+            if name in params and name in weights:
+                raise ValueError(f"{name!r} is both a parameter and a free weight; theta would be ambiguous")
+        return tuple(names)
+
+    def _build_expressions(self) -> None:
+        """Parse every distinct coef text once; each weight refers to one of them."""
+        known = self._param_names
+        texts: dict[str, int] = {}
+        self._exprs = []
+        self._weight_expr = np.empty(len(self.net.weights), dtype=np.int64)
+        for j, w in enumerate(self.net.weights):
+            if w.coef not in texts:
+                expr = parse_expr(w.coef)
+                unknown = sorted(set(expr.variables) - known)
+                if unknown:
+                    raise ValueError(
+                        f"weight {j} ({w.origin or w.matrix}): coef {w.coef!r} uses unknown parameter(s) {unknown}"
+                    )
+                texts[w.coef] = len(self._exprs)
+                self._exprs.append(expr)
+            self._weight_expr[j] = texts[w.coef]
+        self._weight_free = [w.free for w in self.net.weights]
+
+    def _build_derivatives(self) -> None:
+        """The sparse structure of d(connection)/d(theta) and, per term, how to evaluate it."""
+        terms: list[tuple[int, int, object, str | None]] = []  # (weight, theta, expression, free factor)
+        diff_cache: dict[tuple[int, str], object] = {}
+        for j, w in enumerate(self.net.weights):
+            e = int(self._weight_expr[j])
+            expr = self._exprs[e]
+            for name in sorted(expr.variables):
+                if name not in self._theta_param:
+                    continue
+                key = (e, name)
+                if key not in diff_cache:
+                    diff_cache[key] = expr.diff(name)
+                d = diff_cache[key]
+                if d.is_constant and d.evaluate({}) == 0:
+                    continue
+                terms.append((j, self._theta_param[name], d, w.free))
+            if w.free is not None and w.free in self._theta_free:
+                terms.append((j, self._theta_free[w.free], expr, None))
+        conn = self._flat.weight_conn
+        slots = sorted({(int(conn[j]), p) for j, p, _, _ in terms})
+        slot_index = {key: s for s, key in enumerate(slots)}
+        self._terms = terms
+        self._term_slot = np.array([slot_index[(int(conn[j]), p)] for j, p, _, _ in terms], dtype=np.int64)
+        slot_conn = np.array([c for c, _ in slots], dtype=np.int64)
+        self._dtheta = np.array([p for _, p in slots], dtype=np.int64)
+        self._dptr = np.searchsorted(slot_conn, np.arange(self._flat.n_connections + 1)).astype(np.int64)
+
+    # ------------------------------------------------------------------ values
+    @property
+    def n_theta(self) -> int:
+        return len(self.names)
+
+    def theta0(self) -> np.ndarray:
+        """theta at the initial values written in the network file."""
+        params = self.net.parameter_values()
+        weights = self.net.free_weight_values()
+        return np.array(
+            [params[n] if n in self._theta_param else weights[n] for n in self.names], dtype=float
+        )
+
+    def _check_theta(self, theta) -> np.ndarray:
+        theta = np.asarray(theta, dtype=float)
+        if theta.shape != (self.n_theta,):
+            raise ValueError(
+                f"theta has shape {theta.shape}, expected ({self.n_theta},) for {list(self.names)}"
+            )
+        return theta
+
+    def values(self, theta) -> tuple[dict[str, float], dict[str, float]]:
+        """(parameter values, free weight values): the file's initial values with theta applied."""
+        theta = self._check_theta(theta)
+        params = self.net.parameter_values()
+        weights = self.net.free_weight_values()
+        for name, i in self._theta_param.items():
+            params[name] = float(theta[i])
+        for name, i in self._theta_free.items():
+            weights[name] = float(theta[i])
+        return params, weights
+
+    def _connection_values(self, theta, with_derivatives: bool):
+        params, weights = self.values(theta)
+        coef = np.array([_evaluate(expr, params) for expr in self._exprs])
+        wv = coef[self._weight_expr]
+        for j, f in enumerate(self._weight_free):
+            if f is not None:
+                wv[j] *= weights[f]
+        conn_val = self._flat.connection_values(wv)
+        if not with_derivatives:
+            return conn_val, None
+        tv = np.empty(len(self._terms))
+        for i, (_, _, expr, f) in enumerate(self._terms):
+            tv[i] = _evaluate(expr, params) * (weights[f] if f is not None else 1.0)
+        dval = np.bincount(self._term_slot, weights=tv, minlength=self._dtheta.shape[0]).astype(float)
+        return conn_val, dval
+
+    # ------------------------------------------------------------------ checks
+    def _check_inputs(self, inputs) -> np.ndarray:
+        try:
+            u = np.ascontiguousarray(inputs, dtype=float)
+        except (TypeError, ValueError) as exc:
+            raise ValueError(f"inputs must be a numeric array: {exc}") from None
+        if u.ndim != 2 or u.shape[1] != self.n_inputs:
+            raise ValueError(
+                f"inputs has shape {u.shape}, expected (Q, {self.n_inputs}) with columns {list(self.input_names)}"
+            )
+        if u.shape[0] == 0:
+            raise ValueError("inputs has no samples (Q = 0)")
+        bad = ~np.isfinite(u)
+        if bad.any():
+            q, i = np.argwhere(bad)[0]
+            raise ValueError(
+                f"inputs contain {int(bad.sum())} non-finite value(s), first at sample {q} of {self.input_names[i]!r}"
+            )
+        return u
+
+    def _history(self, init: Mapping[str, float] | None) -> np.ndarray:
+        if init is not None:
+            unknown = sorted(set(init) - set(self.output_names))
+            if unknown:
+                raise ValueError(
+                    f"init: {unknown} are not outputs of {self.net.name!r} ({list(self.output_names)})"
+                )
+        return self._flat.history_with(init)
+
+    # ------------------------------------------------------------------ running
+    def _run(self, theta, inputs, init, record: np.ndarray) -> np.ndarray:
+        u = self._check_inputs(inputs)
+        hist = self._history(init)
+        conn_val, _ = self._connection_values(theta, with_derivatives=False)
+        f = self._flat
+        return simulate_kernel(
+            u, f.conn_ptr, f.conn_kind, f.conn_src, f.conn_delay, conn_val, f.transfer, hist, f.ring, record
+        )
+
+    def simulate(self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None) -> np.ndarray:
+        """Network outputs for `inputs`.
+
+        Parameters
+        ----------
+        theta : (P,) array_like
+        inputs : (Q, n_inputs) array_like
+        init : mapping, optional
+            Output name -> value, for states initialised from data.
+
+        Returns
+        -------
+        (Q, n_outputs) ndarray, possibly non-finite when theta makes the network unstable.
+        """
+        return self._run(theta, inputs, init, self._flat.output_index)
+
+    def jacobian(
+        self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None
+    ) -> tuple[np.ndarray, np.ndarray]:
+        """Outputs and their exact derivatives with respect to theta (RTRL).
+
+        Returns
+        -------
+        yhat : (Q, n_outputs) ndarray
+        dyhat : (Q, n_outputs, P) ndarray
+            ``dyhat[t, o, i] = d yhat[t, o] / d theta[i]``.
+        """
+        u = self._check_inputs(inputs)
+        hist = self._history(init)
+        conn_val, dval = self._connection_values(theta, with_derivatives=True)
+        f = self._flat
+        return jacobian_kernel(
+            u,
+            f.conn_ptr,
+            f.conn_kind,
+            f.conn_src,
+            f.conn_delay,
+            conn_val,
+            self._dptr,
+            self._dtheta,
+            dval,
+            f.transfer,
+            hist,
+            f.ring,
+            f.output_index,
+            self.n_theta,
+        )
+
+    def signals(
+        self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None
+    ) -> dict[str, np.ndarray]:
+        """Every neuron's output over time, keyed "layer" (1-neuron layers) or "layer[k]"; each (Q,)."""
+        record = np.arange(self._flat.n_neurons, dtype=np.int64)
+        a = self._run(theta, inputs, init, record)
+        return {name: a[:, k].copy() for k, name in enumerate(self._signal_names)}

@@ -1,0 +1,66 @@
+"""Is the discrete network stable at rest? The guard against chatter of delayed feedback.
+
+A learned friction curve steeper than about 2*J/T at zero speed makes its one-sample-delayed feedback
+unstable: w(t) = w(t-1) + T/J*(M - f(w(t-1))) has the eigenvalue 1 - T*f'(0)/J, below -1 when f'(0) > 2J/T.
+No continuous system does that at this sample time, so a trial step that produces it is rejected.
+
+Generic form: linearize eq. (1)-(2) around rest (zero inputs, zero history) and build the companion matrix of
+a(t) = sum_d A_d a(t-d) with A_d = (I - D L_0)^-1 D L_d, D = diag f'(n_rest). Chatter = an eigenvalue with a
+negative real part outside the unit circle (a sign flip every sample).
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .model import Network
+
+__all__ = ["rest_eigenvalues", "chatter_radius"]
+
+
+def _derivative(transfer: str, n: np.ndarray) -> np.ndarray:
+    if transfer == "tanh":
+        return 1.0 - np.tanh(n) ** 2
+    if transfer == "sin":
+        return np.cos(n)
+    if transfer == "cos":
+        return -np.sin(n)
+    return np.ones_like(n)
+
+
+def rest_eigenvalues(net: Network, values: np.ndarray) -> np.ndarray:
+    """Eigenvalues of the network linearized at rest, for weight values `values` (Network.weights order)."""
+    offsets = np.cumsum([0] + [la.size for la in net.layers])
+    n = int(offsets[-1])
+    dmax = max([w.delay for w in net.weights if w.matrix == "LW"] + [1])
+    L = np.zeros((dmax + 1, n, n))
+    bias = np.zeros(n)
+    transfers = [nr.transfer for la in net.layers for nr in la.neurons]
+    for w, v in zip(net.weights, values, strict=True):
+        row = offsets[w.layer] + w.row
+        if w.matrix == "LW":
+            L[w.delay, row, offsets[w.source] + w.col] += v
+        elif w.matrix == "b":
+            bias[row] += v
+    # operating point: inputs and history zero, delay-free part evaluated in layer order
+    a = np.zeros(n)
+    nrest = np.zeros(n)
+    for k in range(n):
+        nrest[k] = bias[k] + L[0, k] @ a
+        t = transfers[k]
+        a[k] = {"tanh": np.tanh, "sin": np.sin, "cos": np.cos}.get(t, lambda x: x)(nrest[k])
+    D = np.array([_derivative(t, np.array(x)) for t, x in zip(transfers, nrest, strict=True)], dtype=float)
+    M = np.eye(n) - D[:, None] * L[0]
+    blocks = [np.linalg.solve(M, D[:, None] * L[d]) for d in range(1, dmax + 1)]
+    companion = np.zeros((n * dmax, n * dmax))
+    companion[:n, :] = np.hstack(blocks)
+    if dmax > 1:
+        companion[n:, :-n] = np.eye(n * (dmax - 1))
+    return np.linalg.eigvals(companion)
+
+
+def chatter_radius(net: Network, values: np.ndarray) -> float:
+    """Largest modulus among rest eigenvalues with a negative real part (> 1: the network chatters)."""
+    eig = rest_eigenvalues(net, values)
+    neg = eig[eig.real < -1e-12]
+    return float(np.max(np.abs(neg))) if neg.size else 0.0
