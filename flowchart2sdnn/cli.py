@@ -231,7 +231,7 @@ def _register_optional_commands() -> None:
     """Commands that live in their own modules (identify, diagnose, ...) register themselves when present."""
     import importlib
 
-    for module in ("flowchart2sdnn.identify.cli",):
+    for module in ("flowchart2sdnn.identify.cli", "flowchart2sdnn.diagnose.cli", "flowchart2sdnn.batch.cli"):
         try:
             mod = importlib.import_module(module)
         except ModuleNotFoundError as exc:

@@ -25,9 +25,11 @@ def chart_graph(diagram: Diagram) -> nx.DiGraph:
 
 def delay_free_graph(g: nx.DiGraph) -> nx.DiGraph:
     """Edges along which a signal arrives in the same sample: everything but the outputs of delay blocks."""
+    # look kinds up in a plain dict: `g.nodes[u]` inside the loop costs ~20 us an edge (networkx 3.6)
+    kind = dict(g.nodes(data="kind"))
     h = nx.DiGraph()
     h.add_nodes_from(g.nodes(data=True))
-    h.add_edges_from((u, v) for u, v in g.edges if g.nodes[u]["kind"] != "delay")
+    h.add_edges_from([(u, v) for u, v in g.edges if kind[u] != "delay"])
     return h
 
 
@@ -38,7 +40,8 @@ def algebraic_graph(g: nx.DiGraph) -> nx.DiGraph:
     touches an integrator's output is still reported.
     """
     h = delay_free_graph(g)
-    h.remove_edges_from([(u, v) for u, v in list(h.edges) if g.nodes[v]["kind"] == "integrator"])
+    kind = dict(g.nodes(data="kind"))
+    h.remove_edges_from([(u, v) for u, v in list(h.edges) if kind[v] == "integrator"])
     return h
 
 

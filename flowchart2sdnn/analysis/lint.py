@@ -18,7 +18,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..diagram.expr import Expr
 from ..diagram.model import Diagram
 from ..diagram.units import DIMENSIONLESS, Unit, UnitError, parse_unit, unit_of_expr
 from ..errors import Diagnostic, Location
@@ -104,12 +103,15 @@ def _bounds(diagram: Diagram):
 # ---------------------------------------------------------------------------------------------- units
 def _units(diagram: Diagram):
     diags: list[Diagnostic] = []
+    parsed: dict[str, Unit] = {}  # a big chart repeats a few unit texts thousands of times
 
     def parse(text: str | None, obj, what: str) -> Unit | None:
         if text is None:
             return None
         try:
-            return parse_unit(text)
+            if text not in parsed:
+                parsed[text] = parse_unit(text)
+            return parsed[text]
         except UnitError as exc:
             diags.append(Diagnostic("LINT008", "error", f"{what}: bad unit '{text}': {exc.message}",
                                     _loc(diagram, obj), getattr(obj, "name", None)))
@@ -132,9 +134,19 @@ def _units(diagram: Diagram):
         unit.setdefault(name, u)
     reported: set[str] = set()
     second = parse_unit("s")
+    # a block is evaluated again only when one of its inputs got a unit since its last evaluation: the
+    # result cannot change otherwise, and re-evaluating every block in every pass is quadratic on long chains
+    version: dict[str, int] = dict.fromkeys(unit, 0)
+    evaluated: dict[str, int] = {}
+    clock = 0
+    gain_units: dict[str, Unit | None] = {}
     for _ in range(len(diagram.blocks) + 1):  # fixed point: feedback signals get units from declared ones
         changed = False
         for b in diagram.blocks:
+            if b.name in evaluated and all(version.get(t.signal, -1) <= evaluated[b.name] for t in b.inputs):
+                continue
+            clock += 1
+            evaluated[b.name] = clock
             ins = [unit.get(t.signal) for t in b.inputs]
             computed: Unit | None = None
             try:
@@ -149,7 +161,10 @@ def _units(diagram: Diagram):
                                 _loc(diagram, b), b.name))
                     computed = known[0][1] if known and len(known) == len(ins) else None
                 elif b.kind == "gain" and ins[0] is not None:
-                    ku = unit_of_expr(b.k, pu)
+                    if b.name not in gain_units:
+                        gain_units[b.name] = None  # a UnitError below leaves it unknown, reported once
+                        gain_units[b.name] = unit_of_expr(b.k, pu)
+                    ku = gain_units[b.name]
                     computed = ins[0] * ku if ku is not None else None
                 elif b.kind == "integrator" and ins[0] is not None:
                     computed = ins[0] * second
@@ -178,6 +193,8 @@ def _units(diagram: Diagram):
             have = unit.get(b.name)
             if have is None:
                 unit[b.name] = computed
+                clock += 1
+                version[b.name] = clock
                 changed = True
             elif not _same(have, computed) and b.name not in reported:
                 reported.add(b.name)

@@ -16,15 +16,15 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..analysis.loops import LoopReport
 from ..diagram.expr import Expr, const, mul, neg
 from ..diagram.model import Block, Diagram
 from ..errors import SdnnError
-from ..analysis.loops import LoopReport
 
 __all__ = ["Source", "Connection", "NeuronBlock", "DiscreteChart", "discretize", "NEURON_KINDS"]
 
 NEURON_KINDS = ("sum", "integrator", "function", "nonlinear")
-_TRANSFER = {"tanh": "tanh", "sin": "sin", "cos": "cos", "sign_smooth": "tanh"}
+_TRANSFER = {"tanh": "tanh", "sin": "sin", "cos": "cos", "sign_smooth": "tanh", "sat": "sat"}
 DEFAULT_EPS = 1e-3
 
 

@@ -6,6 +6,9 @@ diagnostics of that pass.
 
 from __future__ import annotations
 
+import gc
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -32,7 +35,30 @@ class Compilation:
     warnings: tuple
 
 
+@contextmanager
+def _collector_paused() -> Iterator[None]:
+    """Pause the cyclic garbage collector while the passes build their (acyclic) graphs and tables.
+
+    Every few thousand new containers the collector re-scans everything alive, the whole chart included: at
+    1000 masses that was 40 % of the compile time. Reference counting still frees all acyclic garbage, and
+    the collector runs again (catching any cycle) as soon as the pass is done.
+    """
+    enabled = gc.isenabled()
+    gc.disable()
+    try:
+        yield
+    finally:
+        if enabled:
+            gc.enable()
+
+
 def compile_diagram(diagram: Diagram, seed: int = 0) -> Compilation:
+    """Lint, analyse loops, discretize and emit; SdnnError with the lint errors when the chart is unusable."""
+    with _collector_paused():
+        return _compile(diagram, seed)
+
+
+def _compile(diagram: Diagram, seed: int) -> Compilation:
     diagnostics = lint_diagram(diagram)
     errors = [d for d in diagnostics if d.severity == "error"]
     if errors:
@@ -44,4 +70,6 @@ def compile_diagram(diagram: Diagram, seed: int = 0) -> Compilation:
 
 
 def compile_file(path: str | Path, seed: int = 0) -> Compilation:
-    return compile_diagram(load_diagram(path), seed)
+    """Load, validate and compile a chart file."""
+    with _collector_paused():
+        return _compile(load_diagram(path), seed)

@@ -39,7 +39,7 @@ __all__ = ["RelayFeedback", "simulate_continuous"]
 SUM, GAIN, INTEGRATOR, DELAY, CONSTANT, NONLINEAR, FUNCTION = range(7)
 _KIND = {"sum": SUM, "gain": GAIN, "integrator": INTEGRATOR, "delay": DELAY, "constant": CONSTANT,
          "nonlinear": NONLINEAR, "function": FUNCTION}
-_FUNCTION = {"tanh": 0, "sin": 1, "cos": 2, "sign_smooth": 3}
+_FUNCTION = {"tanh": 0, "sin": 1, "cos": 2, "sign_smooth": 3, "sat": 4}
 _INIT, _SAMPLE, _CONT = 0, 1, 2  # evaluation modes: at t_0, at t_k (k >= 1), inside an interval
 DEFAULT_EPS = 1e-3
 
@@ -118,6 +118,8 @@ def _evaluate(sig, order, ti, tf, src, sgn, nl, buf, zero0, mode, k):
                 y = math.sin(z)
             elif f == 2:
                 y = math.cos(z)
+            elif f == 4:
+                y = min(1.0, max(-1.0, z))
             else:
                 y = math.tanh(z / tf[j, 1])
         sig[s] = y

@@ -28,7 +28,7 @@ __all__ = [
 
 FORMAT_VERSION = 1
 BLOCK_KINDS = ("sum", "gain", "integrator", "delay", "constant", "nonlinear", "function")
-FUNCTIONS = ("tanh", "sin", "cos", "sign_smooth")
+FUNCTIONS = ("tanh", "sin", "cos", "sign_smooth", "sat")  # sat(z) = clip(z, -1, 1)
 
 
 @dataclass(frozen=True)

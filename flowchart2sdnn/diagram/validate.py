@@ -75,6 +75,24 @@ def _is_number(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
+def _finite(x) -> bool:
+    """A number that is a finite float; a YAML integer of 400 digits is not (math.isfinite would raise)."""
+    if not _is_number(x):
+        return False
+    try:
+        return math.isfinite(x)
+    except OverflowError:
+        return False
+
+
+def _show(value, quote: bool = True, limit: int = 40) -> str:
+    """A short printable form of a user value for a message (repr of a huge int raises, a list may be huge)."""
+    if isinstance(value, int) and not isinstance(value, bool) and value.bit_length() > 128:
+        return f"an integer of {value.bit_length()} bits"
+    text = repr(value) if quote else str(value)
+    return text if len(text) <= limit else text[: limit - 3] + "..."
+
+
 class _Validator:
     def __init__(self, doc: LocatedYaml):
         self.doc = doc
@@ -110,7 +128,7 @@ class _Validator:
         if "sdnn" not in data:
             self.error("CHART002", "missing 'sdnn: 1' (the chart format version)", (), hint="add 'sdnn: 1' on top")
         elif version != FORMAT_VERSION or isinstance(version, bool):
-            self.error("CHART002", f"unsupported format version {version!r}; this sdnn reads version 1", ("sdnn",))
+            self.error("CHART002", f"unsupported format version {_show(version)}; this sdnn reads version 1", ("sdnn",))
         name = data.get("name")
         if not isinstance(name, str) or not name.strip():
             self.error("CHART002", f"'name' must be a non-empty string, found {_kind(name)}", ("name",))
@@ -123,8 +141,8 @@ class _Validator:
         if "sample_time" not in data:
             self.error("CHART002", "missing 'sample_time' (seconds, e.g. 0.001)", ())
             ts = 1.0
-        elif not _is_number(ts) or not math.isfinite(ts) or ts <= 0 or ts > 1e6:
-            self.error("CHART004", f"'sample_time' must be a positive number of seconds, found {ts!r}", ("sample_time",))
+        elif not _is_number(ts) or not _finite(ts) or ts <= 0 or ts > 1e6:
+            self.error("CHART004", f"'sample_time' must be a positive number of seconds, found {_show(ts)}", ("sample_time",))
             ts = 1.0
         inputs = self.signals(data.get("inputs"), "inputs")
         outputs = self.signals(data.get("outputs"), "outputs")
@@ -157,7 +175,7 @@ class _Validator:
         if not isinstance(name, str) or not NAME_RE.match(name):
             self.error(
                 "CHART005",
-                f"{what} name {name!r} is not a valid name (letters, digits, '_', not starting with a digit)",
+                f"{what} name {_show(name)} is not a valid name (letters, digits, '_', not starting with a digit)",
                 path,
             )
             return False
@@ -205,8 +223,8 @@ class _Validator:
                 self.error("CHART002", f"missing '{key}' (a number)", path, block)
             return default
         value = spec[key]
-        if not _is_number(value) or not math.isfinite(value):
-            self.error("CHART004", f"'{key}' must be a finite number, found {value!r}", path + (key,), block)
+        if not _is_number(value) or not _finite(value):
+            self.error("CHART004", f"'{key}' must be a finite number, found {_show(value)}", path + (key,), block)
             return default
         return float(value)
 
@@ -215,7 +233,7 @@ class _Validator:
         if value is None:
             return default
         if not isinstance(value, bool):
-            self.error("CHART004", f"'{key}' must be true or false, found {value!r}", path + (key,), block)
+            self.error("CHART004", f"'{key}' must be true or false, found {_show(value)}", path + (key,), block)
             return default
         return value
 
@@ -281,7 +299,7 @@ class _Validator:
             self.error("CHART002", f"missing 'type' (one of: {', '.join(BLOCK_KINDS)})", path, name)
             return None
         if kind not in BLOCK_KINDS:
-            self.error("CHART006", f"unknown block type {kind!r}; expected one of: {', '.join(BLOCK_KINDS)}",
+            self.error("CHART006", f"unknown block type {_show(kind)}; expected one of: {', '.join(BLOCK_KINDS)}",
                        path + ("type",), name, did_you_mean(str(kind), BLOCK_KINDS))
             return None
         self.unknown_keys(spec, COMMON_BLOCK_KEYS + BLOCK_KEYS[kind], path, f"a {kind} block", name)
@@ -304,25 +322,25 @@ class _Validator:
             f = spec.get("f")
             if f not in FUNCTIONS:
                 self.error("CHART004" if "f" in spec else "CHART002",
-                           f"'f' must be one of: {', '.join(FUNCTIONS)}; found {f!r}", path + ("f",), name,
+                           f"'f' must be one of: {', '.join(FUNCTIONS)}; found {_show(f)}", path + ("f",), name,
                            did_you_mean(str(f), FUNCTIONS))
             fields["f"] = f
             eps = self.number(spec, "eps", path, name)
             if eps is not None and eps <= 0:
-                self.error("CHART004", f"'eps' must be positive, found {eps}", path + ("eps",), name)
+                self.error("CHART004", f"'eps' must be positive, found {_show(eps)}", path + ("eps",), name)
             fields["eps"] = eps
         elif kind == "integrator":
             init = spec.get("init", 0.0)
             if init == "data":
                 fields["init"] = "data"
-            elif _is_number(init) and math.isfinite(init):
+            elif _finite(init):
                 fields["init"] = float(init)
             else:
-                self.error("CHART004", f"'init' must be a number or 'data', found {init!r}", path + ("init",), name)
+                self.error("CHART004", f"'init' must be a number or 'data', found {_show(init)}", path + ("init",), name)
         elif kind == "delay":
             n = spec.get("n", 1)
             if not isinstance(n, int) or isinstance(n, bool) or not 1 <= n <= MAX_DELAY:
-                self.error("CHART004", f"'n' must be a whole number of samples from 1 to {MAX_DELAY}, found {n!r}",
+                self.error("CHART004", f"'n' must be a whole number of samples from 1 to {MAX_DELAY}, found {_show(n)}",
                            path + ("n",), name)
                 n = 1
             fields["n"] = n
@@ -333,7 +351,7 @@ class _Validator:
     def nonlinear(self, spec: Mapping, path: tuple, name: str, fields: dict) -> None:
         neurons = spec.get("neurons", 3)
         if not isinstance(neurons, int) or isinstance(neurons, bool) or not 1 <= neurons <= MAX_NEURONS:
-            self.error("CHART004", f"'neurons' must be a whole number from 1 to {MAX_NEURONS}, found {neurons!r}",
+            self.error("CHART004", f"'neurons' must be a whole number from 1 to {MAX_NEURONS}, found {_show(neurons)}",
                        path + ("neurons",), name)
             neurons = 3
         fields["neurons"] = neurons
@@ -341,10 +359,10 @@ class _Validator:
         fields["fixed"] = self.flag(spec, "fixed", path, name)
         rng = spec.get("init_range", [-0.5, 0.5])
         if (
-            not isinstance(rng, list) or len(rng) != 2 or not all(_is_number(x) and math.isfinite(x) for x in rng)
+            not isinstance(rng, list) or len(rng) != 2 or not all(_finite(x) for x in rng)
             or not rng[0] < rng[1]
         ):
-            self.error("CHART004", f"'init_range' must be [low, high] with low < high, found {rng!r}",
+            self.error("CHART004", f"'init_range' must be [low, high] with low < high, found {_show(rng)}",
                        path + ("init_range",), name)
             rng = [-0.5, 0.5]
         fields["init_range"] = (float(rng[0]), float(rng[1]))
@@ -362,7 +380,7 @@ class _Validator:
                 continue
             vec = weights[key]
             if (not isinstance(vec, list) or len(vec) != neurons
-                    or not all(_is_number(x) and math.isfinite(x) for x in vec)):
+                    or not all(_finite(x) for x in vec)):
                 self.error("CHART004", f"weights '{key}' must be a list of {neurons} numbers", wpath + (key,), name)
                 return
             vectors[key] = tuple(float(x) for x in vec)
@@ -402,7 +420,7 @@ class _Validator:
                 sign = -1 if text[0] == "-" else 1
                 text = text[1:].strip()
             if not NAME_RE.match(text):
-                self.error("CHART005", f"{item!r} is not a signal name (optionally prefixed by + or -)", ipath, name)
+                self.error("CHART005", f"{_show(item)} is not a signal name (optionally prefixed by + or -)", ipath, name)
                 continue
             out.append(Term(text, sign))
         return tuple(out)
@@ -417,18 +435,30 @@ class _Validator:
             self.error("CHART004", f"'{key}' must be a number or an expression, found {_kind(value)}",
                        path + (key,), name)
             return None
+        if _is_number(value) and not _finite(value):  # parse_expr's message would print a 400-digit number
+            self.error("CHART007", f"'{key}' must be a finite number, found {_show(value)}", path + (key,), name)
+            return None
         try:
-            return parse_expr(value, names=pnames)
+            expr = parse_expr(value)
+            if not expr.variables <= self.known_parameters(pnames):
+                parse_expr(value, names=pnames)  # raises, naming the unknown parameter with a did-you-mean
+            return expr
         except ExprError as exc:
             col = self.doc.column(*path, key)
             if col is not None and exc.column is not None:
                 col = col + exc.column - 1
             self.diagnostics.append(
-                Diagnostic("CHART007", "error", f"'{key}: {value}': {exc.message}",
+                Diagnostic("CHART007", "error", f"'{key}: {_show(value, quote=False)}': {exc.message}",
                            Location(self.doc.file, self.doc.line(*path, key), col), name,
                            getattr(exc, "hint", None))
             )
             return None
+
+    def known_parameters(self, pnames: list[str]) -> frozenset[str]:
+        # parse_expr(names=...) copies the names into a set on every call: quadratic for 1000-mass charts
+        if getattr(self, "_known", (None,))[0] is not pnames:
+            self._known = (pnames, frozenset(pnames))
+        return self._known[1]
 
     # -- references --------------------------------------------------------------------------------
     def references(self, inputs: list[Signal], outputs: list[Signal], blocks: list[Block]) -> None:
@@ -470,7 +500,7 @@ def _kind(value) -> str:
     if isinstance(value, list):
         return "a list"
     if isinstance(value, str):
-        return f"the text {value[:40]!r}"
+        return f"the text {_show(value)}"
     if _is_number(value):
-        return f"the number {value!r}"
+        return f"the number {_show(value)}"
     return type(value).__name__

@@ -44,6 +44,8 @@ def format_result(result: dict, fixed_from: Sequence[str] = ()) -> str:
     if ms and ms.get("n", 1) > 1:
         out.append("")
         out.append(f"multi-start: {ms['n']} starts, best #{ms['best_index']}; {ms['message']}")
+    shown = {ms.get("message")} if ms else set()
     for w in result.get("warnings", []):
-        out.append(f"warning: {w}")
+        if w not in shown:
+            out.append(f"warning: {w}")
     return "\n".join(out) + "\n"

@@ -126,7 +126,8 @@ def identify(diagram: Diagram, train: Dataset, validation: Dataset | None = None
         status, message = online_result.status, online_result.message
         interrupted = status == "interrupted"
     else:
-        options = LMOptions(max_iter=settings.max_iter)
+        # stop once an iteration gains less than 1e-10 of the cost: further iterations only polish noise
+        options = LMOptions(max_iter=settings.max_iter, min_rel_cost_change=1e-10)
         starts = draw_starts(names, x0, lower, upper, settings.starts, settings.seed,
                              ranges=settings.ranges or None)
 
@@ -161,8 +162,7 @@ def identify(diagram: Diagram, train: Dataset, validation: Dataset | None = None
         fe = problem.fun(x)
         if fe is not None:
             cov = covariance(fe[1], fe[0], names=names)
-            if cov.warning:
-                warnings.append(cov.warning)
+            warnings.extend(_identifiability_warnings(cov, problem))
         radius = problem.chatter(x)
         if radius > CHATTER_WARN:
             warnings.append(f"the fitted network is close to chattering at rest (eigenvalue {-radius:.3f}); a "
@@ -234,6 +234,23 @@ def identify(diagram: Diagram, train: Dataset, validation: Dataset | None = None
             "cost": [float(c) for c in online_result.cost],
         }
     return Identification(result, identified, problem, x, lm_result, online_result)
+
+
+def _identifiability_warnings(cov, problem: Problem) -> list[str]:
+    """Groups that cannot be told apart, when they involve a physical parameter.
+
+    The weights of one learned curve trade off against each other all the time (a*v of a nearly linear
+    neuron); that says nothing about the physics, so such groups are not reported.
+    """
+    physical = {p.name for p in problem.network.parameters}
+    out = []
+    for group in cov.unidentifiable:
+        if physical & set(group):
+            out.append(f"cannot be told apart from this data: {', '.join(group)} (fix all but one, or excite more)")
+    for a, b, r in cov.correlated:
+        if {a, b} & physical and not any({a, b} <= set(g) for g in cov.unidentifiable):
+            out.append(f"{a} and {b} are almost interchangeable here (correlation {r:+.4f})")
+    return out
 
 
 def _data_info(ds: Dataset) -> dict:

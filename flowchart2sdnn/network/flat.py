@@ -30,7 +30,7 @@ __all__ = [
 KIND_NEURON = 0
 KIND_INPUT = 1
 KIND_BIAS = 2
-TRANSFER_CODES = {"linear": 0, "tanh": 1, "sin": 2, "cos": 3}
+TRANSFER_CODES = {"linear": 0, "tanh": 1, "sin": 2, "cos": 3, "sat": 4}
 
 
 @dataclass(frozen=True, eq=False)

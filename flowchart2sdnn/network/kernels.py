@@ -36,6 +36,8 @@ def _transfer(code, n):
         return math.tanh(n)
     if code == 2:
         return math.sin(n)
+    if code == 4:
+        return min(1.0, max(-1.0, n))
     return math.cos(n)
 
 
@@ -48,6 +50,8 @@ def _slope(code, n, a):
         return 1.0 - a * a
     if code == 2:
         return math.cos(n)
+    if code == 4:
+        return 1.0 if -1.0 < n < 1.0 else 0.0
     return -math.sin(n)
 
 

@@ -41,7 +41,7 @@ __all__ = [
 
 NETWORK_FORMAT = "sdnn-network"
 NETWORK_VERSION = 1
-TRANSFERS = ("linear", "tanh", "sin", "cos")
+TRANSFERS = ("linear", "tanh", "sin", "cos", "sat")  # sat: hard clip to [-1, 1]
 
 
 @dataclass(frozen=True)

@@ -62,8 +62,8 @@ BOUND_CODES = {"none": 0, "min": 1, "max": 2, "both": 3}
 
 F_MU, F_EE, F_CC, F_EM, F_ES = range(5)
 (I_COUNT, I_HEAD, I_STEPS, I_BLOCK_POS, I_ACCEPTED, I_REJECTED, I_DIVERGED, I_CHOL_FALLBACK,
- I_SKIPPED, I_RESYNC, I_N_DIV_T) = range(11)
-N_FS, N_ITS = 5, 11
+ I_SKIPPED, I_RESYNC, I_N_DIV_T, I_NEXT, I_BLOCK_ROWS, I_SINCE_RESYNC) = range(14)
+N_FS, N_ITS = 5, 14
 STATUS_OK, STATUS_DIVERGED_BEFORE_START = 0, 1
 
 
@@ -282,7 +282,7 @@ class OnlineState:
     """Every array the kernel reads and mutates (sizes depend on Q, K, P and the network, never on the record).
 
     model:  u, x, dxdu (P,); conn_val (C,); dval (D,); a_buf (ring, N); s_buf (ring, N, P)
-    shadow: u_ck (P,); conn_ck (C,); a_ck (ring, N)
+    shadow: u_ck (P,); conn_ck (C,); dval_ck (D,); a_ck (ring, N); s_ck (ring, N, P)
     window: win_J (Q, n_out, P); win_c, win_e (Q, n_out); A (P, P) lower triangle; b, u_ref (P,)
     average ring over the last K steps: avg_x (K, P); avg_cost (K,)
     scalars: fs (N_FS,) float; its (N_ITS,) int; div_t (capacity of recorded divergence times,) int
@@ -297,7 +297,9 @@ class OnlineState:
     s_buf: np.ndarray
     u_ck: np.ndarray
     conn_ck: np.ndarray
+    dval_ck: np.ndarray
     a_ck: np.ndarray
+    s_ck: np.ndarray
     win_J: np.ndarray
     win_c: np.ndarray
     win_e: np.ndarray
@@ -313,7 +315,7 @@ class OnlineState:
 
     def model(self) -> tuple:
         return (self.u, self.x, self.dxdu, self.conn_val, self.dval, self.a_buf, self.s_buf,
-                self.u_ck, self.conn_ck, self.a_ck, self.history)
+                self.u_ck, self.conn_ck, self.dval_ck, self.a_ck, self.s_ck, self.history)
 
     def window(self) -> tuple:
         return (self.win_J, self.win_c, self.win_e, self.A, self.b, self.u_ref)
@@ -352,7 +354,9 @@ def new_state(
         s_buf=np.zeros((ring, n, p)),
         u_ck=np.array(u0, dtype=float),
         conn_ck=np.zeros(n_connections),
+        dval_ck=np.zeros(n_slots),
         a_ck=a_buf.copy(),
+        s_ck=np.zeros((ring, n, p)),
         win_J=np.zeros((window, n_outputs, p)),
         win_c=np.zeros((window, n_outputs)),
         win_e=np.zeros((window, n_outputs)),
@@ -430,36 +434,18 @@ def _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, slot_of, dn):
 
 
 @numba.njit(cache=True)
-def _simulate_step(t, inputs, net, conn_val, a_buf, slot_of):
-    conn_ptr, conn_kind, conn_src, conn_delay, transfer, _, _, _ = net
-    ring = a_buf.shape[0]
-    slot = t % ring
-    for d in range(ring):
-        slot_of[d] = (t - d + ring) % ring
-    for k in range(transfer.shape[0]):
-        n = 0.0
-        for c in range(conn_ptr[k], conn_ptr[k + 1]):
-            kind = conn_kind[c]
-            if kind == 0:
-                x = a_buf[slot_of[conn_delay[c]], conn_src[c]]
-            elif kind == 1:
-                x = inputs[max(t - conn_delay[c], 0), conn_src[c]]
-            else:
-                x = 1.0
-            n += conn_val[c] * x
-        a_buf[slot, k] = _transfer(transfer[k], n)
-
-
-@numba.njit(cache=True)
-def _resync(win_J, win_c, win_e, A, b, u_ref, u, fs, count):
-    """Recompute the window sums from the ring, re-referenced to the current u."""
+def _resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its):
+    """Recompute the window sums from the ring (valid rows ``head - count .. head - 1``), re-referenced to u."""
+    window = win_J.shape[0]
     n_out = win_J.shape[1]
     n_theta = win_J.shape[2]
     A[:, :] = 0.0
     b[:] = 0.0
     cc = 0.0
     ee = 0.0
-    for q in range(count):
+    count = its[I_COUNT]
+    for i in range(count):
+        q = (its[I_HEAD] - count + i + window) % window
         for o in range(n_out):
             jq = win_J[q, o]
             shift = 0.0
@@ -480,6 +466,33 @@ def _resync(win_J, win_c, win_e, A, b, u_ref, u, fs, count):
     fs[F_EE] = ee
 
 
+@numba.njit(cache=True, inline="always")
+def _remove_row(h, win_J, win_c, win_e, A, b, fs):
+    n_out = win_J.shape[1]
+    n_theta = win_J.shape[2]
+    for o in range(n_out):
+        jo = win_J[h, o]
+        co = win_c[h, o]
+        fs[F_CC] -= co * co
+        fs[F_EE] -= win_e[h, o] * win_e[h, o]
+        for p in range(n_theta):
+            jp = jo[p]
+            b[p] -= jp * co
+            for r in range(p + 1):
+                A[p, r] -= jp * jo[r]
+
+
+@numba.njit(cache=True)
+def _pop_rows(n, win_J, win_c, win_e, A, b, fs, its):
+    """Take back the n newest rows (those of a rejected block); the window shrinks by n."""
+    window = win_J.shape[0]
+    for _ in range(min(n, its[I_COUNT])):
+        h = (its[I_HEAD] - 1 + window) % window
+        _remove_row(h, win_J, win_c, win_e, A, b, fs)
+        its[I_HEAD] = h
+        its[I_COUNT] -= 1
+
+
 @numba.njit(cache=True)
 def _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its):
     """FIFO: drop the oldest row when the window is full, add (J, e); resync when the ring wraps."""
@@ -488,16 +501,7 @@ def _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its):
     n_theta = win_J.shape[2]
     h = its[I_HEAD]
     if its[I_COUNT] == window:
-        for o in range(n_out):
-            jo = win_J[h, o]
-            co = win_c[h, o]
-            fs[F_CC] -= co * co
-            fs[F_EE] -= win_e[h, o] * win_e[h, o]
-            for p in range(n_theta):
-                jp = jo[p]
-                b[p] -= jp * co
-                for r in range(p + 1):
-                    A[p, r] -= jp * jo[r]
+        _remove_row(h, win_J, win_c, win_e, A, b, fs)  # when full, the oldest row sits at the head
     else:
         its[I_COUNT] += 1
     for o in range(n_out):
@@ -514,12 +518,16 @@ def _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its):
             b[p] += jp * c
             for r in range(p + 1):
                 A[p, r] += jp * J[o, r]
+    its[I_BLOCK_ROWS] += 1
     h += 1
     if h == window:
         h = 0
-        _resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its[I_COUNT])
-        its[I_RESYNC] += 1
     its[I_HEAD] = h
+    its[I_SINCE_RESYNC] += 1
+    if its[I_SINCE_RESYNC] >= window:
+        _resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its)
+        its[I_SINCE_RESYNC] = 0
+        its[I_RESYNC] += 1
 
 
 @numba.njit(cache=True)
@@ -571,22 +579,51 @@ def _all_finite(a):
 
 @numba.njit(cache=True)
 def _restore(st, bnd, wp, stack):
-    """Parameters and state back to the shadow's (to the history when the shadow diverged too)."""
-    u, a_buf, u_ck, a_ck, history = st[0], st[5], st[7], st[9], st[10]
+    """Parameters, state and sensitivities back to the shadow's (to the history when it diverged too)."""
+    u, a_buf, s_buf, u_ck, a_ck, s_ck, history = st[0], st[5], st[6], st[7], st[10], st[11], st[12]
     u[:] = u_ck
     set_params(st, bnd, wp, stack)
-    if not _all_finite(a_ck):
+    if not (_all_finite(a_ck) and _all_finite(s_ck)):
         for s in range(a_ck.shape[0]):
             a_ck[s, :] = history
+        s_ck[:, :, :] = 0.0
     a_buf[:, :] = a_ck
+    s_buf[:, :, :] = s_ck
 
 
 @numba.njit(cache=True)
 def _checkpoint(st):
-    u, conn_val, a_buf, u_ck, conn_ck, a_ck = st[0], st[3], st[5], st[7], st[8], st[9]
-    u_ck[:] = u
-    conn_ck[:] = conn_val
-    a_ck[:, :] = a_buf
+    """The shadow takes the model's parameters, weights, state and sensitivities."""
+    st[7][:] = st[0]
+    st[8][:] = st[3]
+    st[9][:] = st[4]
+    st[10][:, :] = st[5]
+    st[11][:, :, :] = st[6]
+
+
+@numba.njit(cache=True)
+def _note_divergence(t, div_t, its):
+    if its[I_N_DIV_T] < div_t.shape[0]:
+        div_t[its[I_N_DIV_T]] = t
+        its[I_N_DIV_T] += 1
+    its[I_DIVERGED] += 1
+
+
+@numba.njit(cache=True)
+def _reject(st, bnd, wp, stack, wnd, fs, its, mu_inc, mu_max):
+    """Take back the current block as trainlm takes back a step: its rows, parameters and state; raise mu."""
+    win_J, win_c, win_e, A, b, u_ref = wnd
+    _pop_rows(its[I_BLOCK_ROWS], win_J, win_c, win_e, A, b, fs, its)
+    _restore(st, bnd, wp, stack)
+    # the rejected rows may have been huge: subtracting them leaves rounding noise of their size in A
+    _resync(win_J, win_c, win_e, A, b, u_ref, st[0], fs, its)
+    its[I_SINCE_RESYNC] = 0
+    its[I_RESYNC] += 1
+    fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
+    fs[F_EM] = 0.0
+    fs[F_ES] = 0.0
+    its[I_BLOCK_POS] = 0
+    its[I_BLOCK_ROWS] = 0
 
 
 # ------------------------------------------------------------------------------------------ the kernel
@@ -603,7 +640,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, st, wnd, avg
 
     Returns STATUS_OK, or STATUS_DIVERGED_BEFORE_START when the model diverged at its start parameters.
     """
-    u, x, dxdu, conn_val, dval, a_buf, s_buf, u_ck, conn_ck, a_ck, history = st
+    u, x, dxdu, conn_val, dval, a_buf, s_buf, u_ck, conn_ck, dval_ck, a_ck, s_ck, history = st
     win_J, win_c, win_e, A, b, u_ref = wnd
     avg_x, avg_cost = avg
     output_index = net[7]
@@ -612,6 +649,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, st, wnd, avg
     n_theta = u.shape[0]
     n_out = output_index.shape[0]
     ring = a_buf.shape[0]
+    window = win_J.shape[0]
     stack = np.empty(iopt[4])
     slot_of = np.empty(ring, dtype=np.int64)
     dn = np.empty(n_theta)
@@ -624,34 +662,27 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, st, wnd, avg
     for t in range(t0, t1):
         if t == start:  # the shadow starts from the model as identification begins
             _checkpoint(st)
+            its[I_BLOCK_ROWS] = 0
         slot = t % ring
         _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, slot_of, dn)
         active = t >= start
         if active:
-            _simulate_step(t, inputs, net, conn_ck, a_ck, slot_of)
-        ok = True
+            _rtrl_step(t, inputs, net, conn_ck, dval_ck, a_ck, s_ck, slot_of, dn)
         sq = 0.0
+        jj = 0.0
         for o in range(n_out):
             r = output_index[o]
             e[o] = targets[t, o] - a_buf[slot, r]
             sq += e[o] * e[o]
             for p in range(n_theta):
                 J[o, p] = s_buf[slot, r, p] * dxdu[p]
-                if not math.isfinite(J[o, p]):
-                    ok = False
-        if not ok or not math.isfinite(sq):
+                jj += J[o, p] * J[o, p]
+        # a row whose square, summed Q times, overflows would wreck the window sums: a divergence too
+        if not (math.isfinite(sq * window) and math.isfinite(jj * window)):
             if not active:
                 return STATUS_DIVERGED_BEFORE_START
-            if its[I_N_DIV_T] < div_t.shape[0]:
-                div_t[its[I_N_DIV_T]] = t
-                its[I_N_DIV_T] += 1
-            its[I_DIVERGED] += 1
-            _restore(st, bnd, wp, stack)
-            s_buf[:, :, :] = 0.0
-            fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
-            fs[F_EM] = 0.0
-            fs[F_ES] = 0.0
-            its[I_BLOCK_POS] = 0
+            _note_divergence(t, div_t, its)
+            _reject(st, bnd, wp, stack, wnd, fs, its, mu_inc, mu_max)
         else:
             _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its)
             if active:
@@ -664,37 +695,35 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, st, wnd, avg
                                                          delta, its):
                     for p in range(n_theta):
                         u[p] += delta[p]
-                    if not set_params(st, bnd, wp, stack):  # a gain such as 1/J2 failed: refuse the step
-                        for p in range(n_theta):
-                            u[p] -= delta[p]
-                        set_params(st, bnd, wp, stack)
-                        if its[I_N_DIV_T] < div_t.shape[0]:
-                            div_t[its[I_N_DIV_T]] = t
-                            its[I_N_DIV_T] += 1
-                        its[I_DIVERGED] += 1
-                        fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
-                    else:
+                    if set_params(st, bnd, wp, stack):
                         k = its[I_STEPS] % avg_x.shape[0]
                         for p in range(n_theta):
                             avg_x[k, p] = x[p]
                         avg_cost[k] = 0.5 * max(fs[F_EE], 0.0)
                         its[I_STEPS] += 1
+                    else:  # a gain such as 1/J2 failed at the new parameters: refuse this one step
+                        for p in range(n_theta):
+                            u[p] -= delta[p]
+                        set_params(st, bnd, wp, stack)
+                        _note_divergence(t, div_t, its)
+                        fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
                 if its[I_BLOCK_POS] >= block:
                     if fs[F_EM] <= fs[F_ES] or not math.isfinite(fs[F_ES]):
                         fs[F_MU] = max(fs[F_MU] * mu_dec, mu_min)
                         its[I_ACCEPTED] += 1
                         _checkpoint(st)
+                        fs[F_EM] = 0.0
+                        fs[F_ES] = 0.0
+                        its[I_BLOCK_POS] = 0
+                        its[I_BLOCK_ROWS] = 0
                     else:
-                        fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
                         its[I_REJECTED] += 1
-                        _restore(st, bnd, wp, stack)
-                    fs[F_EM] = 0.0
-                    fs[F_ES] = 0.0
-                    its[I_BLOCK_POS] = 0
+                        _reject(st, bnd, wp, stack, wnd, fs, its, mu_inc, mu_max)
         if t % record_every == 0:
             i = t // record_every
             for p in range(n_theta):
                 rec_x[i, p] = x[p]
             rec_cost[i] = 0.5 * max(fs[F_EE], 0.0)
             rec_mu[i] = fs[F_MU]
+        its[I_NEXT] = t + 1
     return STATUS_OK

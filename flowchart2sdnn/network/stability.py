@@ -25,6 +25,8 @@ def _derivative(transfer: str, n: np.ndarray) -> np.ndarray:
         return np.cos(n)
     if transfer == "cos":
         return -np.sin(n)
+    if transfer == "sat":
+        return np.where(np.abs(n) < 1.0, 1.0, 0.0)
     return np.ones_like(n)
 
 
@@ -48,7 +50,8 @@ def rest_eigenvalues(net: Network, values: np.ndarray) -> np.ndarray:
     for k in range(n):
         nrest[k] = bias[k] + L[0, k] @ a
         t = transfers[k]
-        a[k] = {"tanh": np.tanh, "sin": np.sin, "cos": np.cos}.get(t, lambda x: x)(nrest[k])
+        a[k] = {"tanh": np.tanh, "sin": np.sin, "cos": np.cos,
+                "sat": lambda x: np.clip(x, -1.0, 1.0)}.get(t, lambda x: x)(nrest[k])
     D = np.array([_derivative(t, np.array(x)) for t, x in zip(transfers, nrest, strict=True)], dtype=float)
     M = np.eye(n) - D[:, None] * L[0]
     blocks = [np.linalg.solve(M, D[:, None] * L[d]) for d in range(1, dmax + 1)]
