@@ -60,12 +60,17 @@ def main() -> None:
 def lint(chart: str, fmt: str) -> None:
     """Check CHART: loops, signals, units, bounds, identifiability. Exit 1 when any error."""
     from .analysis.lint import lint_diagram
+    from .compiler import compile_diagram
     from .diagram.validate import load_diagram
 
+    diagnostics: list = []
     try:
-        diagnostics = lint_diagram(load_diagram(chart))
+        diagram = load_diagram(chart)
+        diagnostics = lint_diagram(diagram)
+        if not any(d.severity == "error" for d in diagnostics):
+            compile_diagram(diagram)  # what only the compiler finds (a loop of gains, an overflowing weight)
     except SdnnError as exc:
-        diagnostics = list(exc.diagnostics)
+        diagnostics = diagnostics + list(exc.diagnostics)
     errors = [d for d in diagnostics if d.severity == "error"]
     if fmt == "json":
         click.echo(json.dumps({"file": chart, "errors": len(errors), "diagnostics": [d.to_dict() for d in diagnostics]},
@@ -165,13 +170,17 @@ def simulate(chart, data, output, params, continuous, signals, alignment, mappin
         columns = {"time": time, **{n: y[:, i] for i, n in enumerate(compiled.output_names)}}
         if signals == "all":
             from .alignment import network_inputs
+            from .network.flat import flatten, signal_names
 
-            sig = compiled.signals(theta, network_inputs(u, alignment), init)
-            pad = 1 if alignment == "zoh" else 0
+            p = network_inputs(u, alignment)
+            names = signal_names(net)
+            sig = compiled.signals(theta, p, init) if len(p) else {n: np.empty(0) for n in names}
+            # zoh: row 0 is the initial state of every neuron (its history), as for the outputs
+            history = dict(zip(names, flatten(net).history_with(init), strict=True))
             for name, values in sig.items():
                 if name.endswith("__out") or name in columns:
                     continue
-                columns[name] = np.concatenate([np.full(pad, values[0] if len(values) else 0.0), values])
+                columns[name] = np.concatenate([[history[name]], values]) if alignment == "zoh" else values
     if output:
         write_csv(output, columns)
     else:

@@ -141,8 +141,10 @@ class SerialExecutor(Executor):
         return iter(list(futures))
 
 
-def _ignore_sigint() -> None:
+def _worker_init(extra: Callable[[], None] | None) -> None:
     signal.signal(signal.SIGINT, signal.SIG_IGN)
+    if extra is not None:
+        extra()
 
 
 def start_method() -> str:
@@ -159,11 +161,13 @@ class ProcessExecutor(Executor):
         Number of processes (>= 1).
     method : str, optional
         Start method, default :func:`start_method`.
+    initializer : callable, optional
+        Run once in each worker when it starts (module-level, picklable), e.g. to limit BLAS threads.
     """
 
     kind = "processes"
 
-    def __init__(self, workers: int, method: str | None = None):
+    def __init__(self, workers: int, method: str | None = None, initializer: Callable[[], None] | None = None):
         if not isinstance(workers, int) or workers < 1:
             raise ValueError(f"`workers` must be an int >= 1, got {workers!r}")
         self.workers = workers
@@ -171,8 +175,9 @@ class ProcessExecutor(Executor):
         ctx = multiprocessing.get_context(self.method)
         if self.method == "forkserver":
             # the server imports the package once; every worker forks from it with numba and the kernels loaded
-            ctx.set_forkserver_preload(["flowchart2sdnn.parallel", "flowchart2sdnn.identify.run"])
-        self._pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_ignore_sigint)
+            ctx.set_forkserver_preload(["flowchart2sdnn.parallel", "flowchart2sdnn.identify.problem"])
+        self._pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init,
+                                            initargs=(initializer,))
 
     def map(self, fn: Callable, items: Iterable) -> Iterator:
         futures = [self._pool.submit(fn, item) for item in items]
@@ -250,7 +255,7 @@ class DaskExecutor(Executor):
                                    hint="start one with 'dask scheduler' and workers with 'dask worker ADDRESS'"
                                    ) from None
         self.client = client
-        self.address = getattr(client, "scheduler", None) and client.scheduler.address
+        self.address = getattr(getattr(client, "scheduler", None), "address", None) or scheduler
         self.workers = max(1, len(client.scheduler_info().get("workers", {})))
 
     def map(self, fn: Callable, items: Iterable) -> Iterator:

@@ -68,7 +68,7 @@ def _names(expr_text: str) -> set[str]:
 
 def network_dot(net: Network) -> str:
     """Graphviz drawing of the discrete network, neurons numbered layer.position as in the paper's Fig. 5."""
-    lines = [f'digraph "{net.name}" {{', "  rankdir=LR;", '  node [shape=circle, fontsize=10];']
+    lines = [f'digraph "{_dot_text(net.name)}" {{', "  rankdir=LR;", '  node [shape=circle, fontsize=10];']
     for i, s in enumerate(net.inputs):
         lines.append(f'  "p{i + 1}" [shape=box, label="{s.name}"];')
     for m, la in enumerate(net.layers):
@@ -94,6 +94,11 @@ def network_dot(net: Network) -> str:
         lines.append(f'  "{o.layer + 1}.{o.neuron + 1}" -> "out_{o.name}";')
     lines.append("}")
     return "\n".join(lines) + "\n"
+
+
+def _dot_text(text: str) -> str:
+    """Text inside a DOT double-quoted string: a chart name may hold quotes, backslashes or line breaks."""
+    return text.replace("\\", "\\\\").replace('"', '\\"').replace("\r", "").replace("\n", "\\n")
 
 
 def table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:

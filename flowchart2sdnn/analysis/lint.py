@@ -12,13 +12,15 @@
 | LINT008 | error    | bad unit text |
 | LINT009 | warning  | argument of a function block is not dimensionless |
 | LINT010 | error    | chart with no input or no output |
+| LINT011 | error    | a gain cannot be evaluated at the parameters' initial values (1/J with J = 0, overflow) |
 """
 
 from __future__ import annotations
 
 import numpy as np
 
-from ..diagram.model import Diagram
+from ..diagram.expr import Expr, ExprError
+from ..diagram.model import Block, Diagram
 from ..diagram.units import DIMENSIONLESS, Unit, UnitError, parse_unit, unit_of_expr
 from ..errors import Diagnostic, Location
 from .graph import chart_graph, distances
@@ -29,7 +31,7 @@ __all__ = ["lint_diagram"]
 
 def lint_diagram(diagram: Diagram) -> list[Diagnostic]:
     out: list[Diagnostic] = []
-    for check in (_io, _algebraic_loops, _unused, _reachability, _bounds, _units, _identifiability):
+    for check in (_io, _algebraic_loops, _unused, _reachability, _bounds, _gains, _units, _identifiability):
         out.extend(check(diagram))
     return out
 
@@ -100,6 +102,19 @@ def _bounds(diagram: Diagram):
                              _loc(diagram, p))
 
 
+def _gains(diagram: Diagram):
+    env = diagram.parameter_values()
+    for b in diagram.blocks:
+        if b.k is None:
+            continue
+        try:
+            b.k.evaluate(env)
+        except ExprError as exc:
+            yield Diagnostic("LINT011", "error", f"'k: {b.k}' cannot be evaluated at the parameters' initial "
+                             f"values: {exc.message}", _loc(diagram, b), b.name,
+                             "give its parameters an init where the gain is a finite number")
+
+
 # ---------------------------------------------------------------------------------------------- units
 def _units(diagram: Diagram):
     diags: list[Diagnostic] = []
@@ -114,7 +129,7 @@ def _units(diagram: Diagram):
             return parsed[text]
         except UnitError as exc:
             diags.append(Diagnostic("LINT008", "error", f"{what}: bad unit '{text}': {exc.message}",
-                                    _loc(diagram, obj), getattr(obj, "name", None)))
+                                    _loc(diagram, obj), obj.name if isinstance(obj, Block) else None, exc.hint))
             return None
 
     pu = {p.name: parse(p.unit, p, f"parameter '{p.name}'") for p in diagram.parameters}
@@ -134,6 +149,14 @@ def _units(diagram: Diagram):
         unit.setdefault(name, u)
     reported: set[str] = set()
     second = parse_unit("s")
+    products: dict[tuple[Unit, Unit], Unit] = {}  # Unit arithmetic is Fraction-heavy; charts repeat a few
+
+    def times(a: Unit, b: Unit) -> Unit:
+        key = (a, b)
+        if key not in products:
+            products[key] = a * b
+        return products[key]
+
     # a block is evaluated again only when one of its inputs got a unit since its last evaluation: the
     # result cannot change otherwise, and re-evaluating every block in every pass is quadratic on long chains
     version: dict[str, int] = dict.fromkeys(unit, 0)
@@ -163,18 +186,18 @@ def _units(diagram: Diagram):
                 elif b.kind == "gain" and ins[0] is not None:
                     if b.name not in gain_units:
                         gain_units[b.name] = None  # a UnitError below leaves it unknown, reported once
-                        gain_units[b.name] = unit_of_expr(b.k, pu)
+                        gain_units[b.name] = _unit_of_k(b.k, pu)
                     ku = gain_units[b.name]
-                    computed = ins[0] * ku if ku is not None else None
+                    computed = times(ins[0], ku) if ku is not None else None
                 elif b.kind == "integrator" and ins[0] is not None:
-                    computed = ins[0] * second
+                    computed = times(ins[0], second)
                 elif b.kind == "delay":
                     computed = ins[0]
                 elif b.kind == "constant":
-                    computed = unit_of_expr(b.k, pu)
+                    computed = _unit_of_k(b.k, pu)
                 elif b.kind == "function":
                     computed = DIMENSIONLESS
-                    ku = unit_of_expr(b.k, pu) if b.k is not None else DIMENSIONLESS
+                    ku = _unit_of_k(b.k, pu) if b.k is not None else DIMENSIONLESS
                     if ins[0] is not None and ku is not None:
                         arg = ins[0] * ku
                         if not arg.is_dimensionless and b.name not in reported and b.f != "sign_smooth":
@@ -204,6 +227,22 @@ def _units(diagram: Diagram):
         if not changed:
             break
     return diags
+
+
+def _unit_of_k(k: Expr, parameter_units: dict) -> Unit | None:
+    """Unit of a block's `k`; None (unknown) for a plain number other than +-1.
+
+    A bare number says nothing about units: `k: 0.3` on a friction-offset constant declared `unit: N*m`, or
+    `k: 1.2` after a sign function, is a torque. Taking it as dimensionless reported unit errors in charts
+    that declare no units at all, and in charts whose declared unit could not be reconciled with it.
+    """
+    if k.is_constant:
+        try:
+            value = k.evaluate({})
+        except ExprError:
+            return None
+        return DIMENSIONLESS if abs(value) == 1.0 else None
+    return unit_of_expr(k, parameter_units)
 
 
 def _same(a: Unit, b: Unit) -> bool:

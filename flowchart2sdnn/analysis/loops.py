@@ -50,15 +50,13 @@ def find_algebraic_loops(g: nx.DiGraph) -> list[tuple[str, ...]]:
     """One loop per strongly connected component of the feedthrough graph, in signal order."""
     h = algebraic_graph(g)
     loops = []
-    for comp in sorted(nx.strongly_connected_components(h), key=lambda c: sorted(c)):
-        if len(comp) == 1:
-            (node,) = comp
-            if not h.has_edge(node, node):
-                continue
-        sub = h.subgraph(comp)
+    cyclic = [c for c in nx.strongly_connected_components(h) if len(c) > 1 or h.has_edge(*(next(iter(c)),) * 2)]
+    for comp in sorted(cyclic, key=sorted):
+        # the shortest cycle through the first name, by names only: not by the order of the YAML
         start = min(comp)
-        cycle = nx.find_cycle(sub, source=start)
-        loops.append(tuple(u for u, _ in cycle))
+        succ = {n: sorted(x for x in h.successors(n) if x in comp) for n in comp}
+        cycles = [(start,) + _shortest_path(succ, first, start)[:-1] for first in succ[start]]
+        loops.append(min(cycles, key=len))
     return loops
 
 
@@ -75,6 +73,7 @@ def analyse_loops(diagram: Diagram) -> LoopReport:
         return (din.get(node, far), -dout.get(node, -1), _KIND_RANK.get(g.nodes[node]["kind"], 9),
                 h.in_degree(node), h.out_degree(node), node)
 
+    succ = {n: sorted(h.successors(n), key=key) for n in h}  # every search visits neighbours in this order
     roots = sorted(inputs, key=key)
     roots += sorted((n for n in g if g.nodes[n]["kind"] == "constant"), key=key)
     roots += sorted(g, key=key)
@@ -88,7 +87,7 @@ def analyse_loops(diagram: Diagram) -> LoopReport:
         # iterative DFS: charts of 1000 masses are deeper than Python's recursion limit
         state[root] = 1
         order.append(root)
-        stack = [(root, iter(sorted(h.successors(root), key=key)))]
+        stack = [(root, iter(succ[root]))]
         while stack:
             node, children = stack[-1]
             for child in children:
@@ -96,7 +95,7 @@ def analyse_loops(diagram: Diagram) -> LoopReport:
                 if mark is None:
                     state[child] = 1
                     order.append(child)
-                    stack.append((child, iter(sorted(h.successors(child), key=key))))
+                    stack.append((child, iter(succ[child])))
                     break
                 if mark == 1:
                     back.append((node, child))
@@ -108,6 +107,24 @@ def analyse_loops(diagram: Diagram) -> LoopReport:
     for u, v in back:
         if any(u in loop and v in loop for loop in algebraic):
             continue  # reported as an algebraic loop; delaying it would hide the error
-        path = nx.shortest_path(h, v, u)
-        delayed.append((u, v, tuple(path)))
+        delayed.append((u, v, _shortest_path(succ, v, u)))
     return LoopReport(tuple(algebraic), tuple(delayed), tuple(order))
+
+
+def _shortest_path(succ: dict[str, list[str]], source: str, target: str) -> tuple[str, ...]:
+    """Breadth-first path visiting neighbours in `succ` order, so that among equally short loops the one shown
+    does not depend on the YAML order (networkx's shortest_path follows insertion order)."""
+    parent: dict[str, str | None] = {source: None}
+    frontier = [source]
+    while frontier and target not in parent:
+        nxt = []
+        for node in frontier:
+            for child in succ[node]:
+                if child not in parent:
+                    parent[child] = node
+                    nxt.append(child)
+        frontier = nxt
+    path = [target]
+    while parent[path[-1]] is not None:
+        path.append(parent[path[-1]])  # type: ignore[arg-type]
+    return tuple(reversed(path))

@@ -17,7 +17,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..analysis.loops import LoopReport
-from ..diagram.expr import Expr, const, mul, neg
+from ..diagram.expr import Expr, Num, const, mul, neg
 from ..diagram.model import Block, Diagram
 from ..errors import SdnnError
 
@@ -26,6 +26,7 @@ __all__ = ["Source", "Connection", "NeuronBlock", "DiscreteChart", "discretize",
 NEURON_KINDS = ("sum", "integrator", "function", "nonlinear")
 _TRANSFER = {"tanh": "tanh", "sin": "sin", "cos": "cos", "sign_smooth": "tanh", "sat": "sat"}
 DEFAULT_EPS = 1e-3
+MAX_FOLDED = 40  # gain/delay blocks folded into one weight with a parameter in it (expr.py nests at most 50)
 
 
 @dataclass(frozen=True)
@@ -88,24 +89,44 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0) -> DiscreteCh
     rank = {name: i for i, name in enumerate(loops.order)}
 
     def trace(signal: str, consumer: str, coef: Expr, delay: int, path: tuple[str, ...]) -> list[Connection]:
-        delay += 1 if (signal, consumer) in delayed else 0
-        path = (signal,) + path
-        if signal in inputs:
-            return [Connection(Source("input", signal), coef, delay, None, path)]
-        b = blocks[signal]
-        if b.kind in ("sum", "integrator", "function"):
-            return [Connection(Source("neuron", b.name), coef, delay, None, path)]
-        if b.kind == "nonlinear":
-            return [Connection(Source("neuron", b.name, i), coef, delay, f"{b.name}.v{i + 1}", path)
-                    for i in range(b.neurons)]
-        if b.kind == "constant":
-            return [Connection(Source("bias", b.name), mul(coef, b.k), 0, None, path)]
-        (term,) = b.inputs
-        factor = b.k if b.kind == "gain" else const(1.0)
-        if term.sign < 0:
-            factor = neg(factor)
-        extra = b.n if b.kind == "delay" else 0
-        return trace(term.signal, b.name, mul(coef, factor), delay + extra, path)
+        """Follow `signal` back through folded blocks (gain, delay) to a neuron, an input or a constant.
+
+        A loop: long chains of gains are legal, and Python's recursion limit is not a chart limit.
+        """
+        folded: list[str] = []
+        while True:
+            delay += 1 if (signal, consumer) in delayed else 0
+            path = (signal,) + path
+            if signal in inputs:
+                return [Connection(Source("input", signal), coef, delay, None, path)]
+            b = blocks[signal]
+            if b.kind in ("sum", "integrator", "function"):
+                return [Connection(Source("neuron", b.name), coef, delay, None, path)]
+            if b.kind == "nonlinear":
+                return [Connection(Source("neuron", b.name, i), coef, delay, f"{b.name}.v{i + 1}", path)
+                        for i in range(b.neurons)]
+            if b.kind == "constant":
+                return [Connection(Source("bias", b.name), mul(coef, b.k), 0, None, path)]
+            if b.name in folded:  # a loop of gains and delays only: no neuron to carry its state
+                loop = folded[folded.index(b.name):][::-1]
+                raise SdnnError.at(
+                    "COMPILE003", f"loop {' -> '.join(loop + [loop[0]])} has only gain and delay blocks: it has no "
+                    "input and always carries 0", diagram.file, b.location.line if b.location else None,
+                    block=b.name, hint="add a sum block to the loop, or remove the loop")
+            folded.append(b.name)
+            (term,) = b.inputs
+            factor = b.k if b.kind == "gain" else const(1.0)
+            if term.sign < 0:
+                factor = neg(factor)
+            extra = b.n if b.kind == "delay" else 0
+            signal, consumer, coef, delay = term.signal, b.name, mul(coef, factor), delay + extra
+            if not isinstance(coef, Num) and len(folded) > MAX_FOLDED:
+                # the folded weight nests one level per gain; the network file must be able to read it back
+                raise SdnnError.at(
+                    "COMPILE004", f"{len(folded)} gain/delay blocks in series fold into one weight, more than "
+                    f"the {MAX_FOLDED} a weight expression may nest", diagram.file,
+                    b.location.line if b.location else None, block=b.name,
+                    hint="merge the gains into one, or put a sum block in the chain")
 
     def terms_of(b: Block, scale: Expr) -> tuple[Connection, ...]:
         out: list[Connection] = []

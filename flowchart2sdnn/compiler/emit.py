@@ -2,10 +2,14 @@
 
 from __future__ import annotations
 
+import math
+
 import networkx as nx
 
 from ..analysis.loops import LoopReport
+from ..diagram.expr import MAX_DEPTH, Expr, ExprError, parse_expr
 from ..diagram.model import Diagram
+from ..errors import SdnnError
 from ..network.model import (
     DelayedEdge,
     FreeWeightSpec,
@@ -21,6 +25,8 @@ from ..network.model import (
 from .discretize import DiscreteChart, NeuronBlock
 
 __all__ = ["emit_network", "layer_order"]
+
+_MAX_SHORT = MAX_DEPTH  # coefficient texts this short are within every limit of the expression reader
 
 
 def layer_order(chart: DiscreteChart, loops: LoopReport) -> list[NeuronBlock]:
@@ -48,6 +54,7 @@ def emit_network(diagram: Diagram, chart: DiscreteChart, loops: LoopReport, seed
     input_index = {s.name: i for i, s in enumerate(diagram.inputs)}
     layers = []
     weights = []
+    coefs: list[Expr] = []  # the expression of each weight, for the value check without re-parsing
     initial = []
     for m, nb in enumerate(ordered):
         size = len(nb.transfers)
@@ -57,6 +64,7 @@ def emit_network(diagram: Diagram, chart: DiscreteChart, loops: LoopReport, seed
                                 block, nb.kind))
         for k, conns in enumerate(nb.inputs):
             for c in conns:
+                coefs.append(c.coef)
                 common = {"layer": m, "row": k, "coef": str(c.coef), "free": c.free,
                           "origin": " -> ".join(c.origin)}
                 if c.source.kind == "neuron":
@@ -98,4 +106,36 @@ def emit_network(diagram: Diagram, chart: DiscreteChart, loops: LoopReport, seed
         },
     )
     net.verify()
+    _check_values(diagram, net, coefs)
     return net
+
+
+def _check_values(diagram: Diagram, net: Network, coefs: list[Expr]) -> None:
+    """Every weight must be a finite number at the initial values, and its text must read back.
+
+    Lint checks each gain; a folded chain of gains (1e200 * 1e200) can still overflow, which is caught here.
+    A text of at most MAX_SHORT characters cannot break the reader's limits (each level of nesting and each
+    node takes a character), so only longer ones are parsed again: re-parsing all costs a quarter of the
+    compile time of a 1000-mass chart.
+    """
+    env, free = net.parameter_values(), net.free_weight_values()
+    for w, expr in zip(net.weights, coefs, strict=True):
+        try:
+            if len(w.coef) > _MAX_SHORT:
+                parse_expr(w.coef)
+            value = expr.evaluate(env) * (free[w.free] if w.free is not None else 1.0)
+            problem = None if math.isfinite(value) else f"is {value}"
+        except ExprError as exc:
+            problem = f"cannot be evaluated ({_short(exc.message)})"
+        if problem is None:
+            continue
+        block = net.layers[w.layer].block
+        location = diagram.block(block).location if block in diagram.block_names else None
+        raise SdnnError.at("COMPILE002", f"the weight along {_short(w.origin)} = {_short(w.coef)} {problem} at "
+                           "the parameters' initial values", diagram.file, location.line if location else None,
+                           block=block, hint="check the gains and parameter values along this path")
+
+
+def _short(text: str | None, limit: int = 80) -> str:
+    text = text or ""
+    return text if len(text) <= limit else text[: limit // 2 - 2] + " ... " + text[-(limit // 2 - 3):]

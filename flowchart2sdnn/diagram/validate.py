@@ -32,6 +32,7 @@ __all__ = ["load_diagram", "diagram_from_text", "diagram_from_yaml", "TOP_KEYS",
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 RESERVED = frozenset({"pi", "data", "T"})
+_YAML11_BOOLS = {"yes": True, "on": True, "no": False, "off": False}
 MAX_NEURONS = 100
 MAX_DELAY = 100_000
 
@@ -53,8 +54,7 @@ BLOCK_KEYS: dict[str, tuple[str, ...]] = {
 def load_diagram(path: str | Path) -> Diagram:
     """Read, parse and validate a chart file. Raises SdnnError listing every structural problem."""
     doc = load_yaml(path)
-    raw = Path(path).read_bytes()
-    return diagram_from_yaml(doc, hashlib.sha256(raw).hexdigest())
+    return diagram_from_yaml(doc, doc.sha256)
 
 
 def diagram_from_text(text: str, name: str = "<chart>") -> Diagram:
@@ -97,6 +97,8 @@ class _Validator:
     def __init__(self, doc: LocatedYaml):
         self.doc = doc
         self.diagnostics: list[Diagnostic] = []
+        self.broken_blocks: set[str] = set()  # blocks that exist but failed to validate
+        self._known: tuple[list[str] | None, frozenset[str]] = (None, frozenset())
 
     # -- reporting ---------------------------------------------------------------------------------
     def error(self, code: str, message: str, path: tuple = (), block: str | None = None, hint=None) -> None:
@@ -232,6 +234,8 @@ class _Validator:
         value = spec.get(key, default)
         if value is None:
             return default
+        if isinstance(value, str) and value.lower() in _YAML11_BOOLS:  # the loader reads only true/false
+            return _YAML11_BOOLS[value.lower()]
         if not isinstance(value, bool):
             self.error("CHART004", f"'{key}' must be true or false, found {_show(value)}", path + (key,), block)
             return default
@@ -280,10 +284,13 @@ class _Validator:
             self.error("CHART004", f"'blocks' must be a mapping of block names, found {_kind(section)}", ("blocks",))
             return []
         out = []
+        # references to a block that failed to validate are not reported as "undefined" as well
+        self.broken_blocks = {n for n in section if isinstance(n, str) and NAME_RE.match(n)}
         for name, spec in section.items():
             block = self.block(name, spec, pnames)
             if block is not None:
                 out.append(block)
+        self.broken_blocks -= {b.name for b in out}
         return out
 
     def block(self, name, spec, pnames: list[str]) -> Block | None:
@@ -302,7 +309,8 @@ class _Validator:
             self.error("CHART006", f"unknown block type {_show(kind)}; expected one of: {', '.join(BLOCK_KINDS)}",
                        path + ("type",), name, did_you_mean(str(kind), BLOCK_KINDS))
             return None
-        self.unknown_keys(spec, COMMON_BLOCK_KEYS + BLOCK_KEYS[kind], path, f"a {kind} block", name)
+        article = "an" if kind[0] in "aeiou" else "a"
+        self.unknown_keys(spec, COMMON_BLOCK_KEYS + BLOCK_KEYS[kind], path, f"{article} {kind} block", name)
         fields: dict = {
             "name": name,
             "kind": kind,
@@ -416,7 +424,7 @@ class _Validator:
                 continue
             text = item.strip()
             sign = 1
-            if text[:1] in "+-":
+            if text.startswith(("+", "-")):  # not `text[:1] in "+-"`: that is true for '' as well
                 sign = -1 if text[0] == "-" else 1
                 text = text[1:].strip()
             if not NAME_RE.match(text):
@@ -456,7 +464,7 @@ class _Validator:
 
     def known_parameters(self, pnames: list[str]) -> frozenset[str]:
         # parse_expr(names=...) copies the names into a set on every call: quadratic for 1000-mass charts
-        if getattr(self, "_known", (None,))[0] is not pnames:
+        if self._known[0] is not pnames:
             self._known = (pnames, frozenset(pnames))
         return self._known[1]
 
@@ -469,9 +477,10 @@ class _Validator:
                 self.error("CHART008", f"signal '{b.name}' is driven twice: it is a chart input and a block",
                            ("blocks", b.name), b.name, "rename the block or the input")
         known = input_names | block_names
+        broken = self.broken_blocks
         for b in blocks:
             for i, t in enumerate(b.inputs):
-                if t.signal not in known:
+                if t.signal not in known and t.signal not in broken:
                     ipath = ("blocks", b.name, "in", i) if len(b.inputs) > 1 else ("blocks", b.name, "in")
                     self.error("CHART009", f"undefined signal '{t.signal}' (not an input nor a block)", ipath,
                                b.name, did_you_mean(t.signal, known))
@@ -479,7 +488,7 @@ class _Validator:
             if s.name in input_names:
                 self.error("CHART010", f"output '{s.name}' is a chart input; outputs must be block signals",
                            ("outputs", s.name))
-            elif s.name not in block_names:
+            elif s.name not in block_names and s.name not in broken:
                 self.error("CHART009", f"output '{s.name}' is not a block of the chart", ("outputs", s.name),
                            hint=did_you_mean(s.name, block_names))
         if not outputs and "outputs" in (self.doc.data or {}):

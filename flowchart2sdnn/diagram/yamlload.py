@@ -7,6 +7,9 @@ silently overwrites, and (c) stop alias bombs ("billion laughs") by counting the
 
 from __future__ import annotations
 
+import dataclasses
+import hashlib
+import re
 from dataclasses import dataclass, field
 from pathlib import Path
 
@@ -19,8 +22,31 @@ __all__ = ["LocatedYaml", "load_yaml", "parse_yaml_text", "MAX_CHART_BYTES", "MA
 MAX_CHART_BYTES = 1_000_000
 MAX_NODES = 200_000
 MAX_DEPTH = 64
-# libyaml (when PyYAML was built with it) parses a 1000-mass chart three times faster; both are safe loaders
-_LOADER = getattr(yaml, "CSafeLoader", yaml.SafeLoader)
+
+
+class _ChartLoader(getattr(yaml, "CSafeLoader", yaml.SafeLoader)):  # type: ignore[misc]
+    """The safe loader (libyaml's when PyYAML has it: three times faster on a 1000-mass chart) with two
+    YAML 1.2 readings that charts need:
+
+    - ``1e-3`` is a number. YAML 1.1 wants a dot and a signed exponent (``1.0e-3``), so plain PyYAML turns
+      ``sample_time: 1e-3`` into the text '1e-3' and the chart fails with a baffling message;
+    - only ``true``/``false`` are booleans. YAML 1.1 also reads ``on``, ``off``, ``yes`` and ``no`` as
+      booleans, so a signal named ``off`` (an offset) became ``False``. Validation still takes yes/no/on/off
+      for flags such as ``fixed``.
+    """
+
+
+_ChartLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:float",
+    re.compile(r"^[-+]?(?:[0-9][0-9_]*)(?:\.[0-9_]*)?[eE][-+]?[0-9]+$"),
+    list("-+0123456789"),
+)
+for _resolvers in _ChartLoader.yaml_implicit_resolvers.values():  # lists copied by the call above
+    _resolvers[:] = [(tag, rx) for tag, rx in _resolvers if tag != "tag:yaml.org,2002:bool"]
+_ChartLoader.add_implicit_resolver(
+    "tag:yaml.org,2002:bool", re.compile(r"^(?:true|True|TRUE|false|False|FALSE)$"), list("tTfF")
+)
+_LOADER = _ChartLoader
 
 Path_ = tuple  # a path into the document: ("blocks", "MB1", "in", 2)
 
@@ -32,6 +58,7 @@ class LocatedYaml:
     file: str
     data: object
     marks: dict = field(default_factory=dict)
+    sha256: str | None = None  # of the file's bytes, when read from a file
 
     def line(self, *path) -> int | None:
         """Line of the deepest known prefix of `path` (a missing key reports its parent's line)."""
@@ -66,12 +93,17 @@ def load_yaml(path: str | Path) -> LocatedYaml:
     except OSError as exc:
         raise SdnnError.at("YAML001", f"cannot read: {exc.strerror or exc}", name) from None
     if b"\x00" in raw:
-        raise SdnnError.at("YAML003", "binary file (contains NUL bytes), expected a YAML text file", name)
+        at = raw.index(b"\x00")
+        raise SdnnError.at("YAML003", "binary file (contains NUL bytes), expected a YAML text file", name,
+                           raw.count(b"\n", 0, at) + 1)
     try:
         text = raw.decode("utf-8-sig")
     except UnicodeDecodeError as exc:
-        raise SdnnError.at("YAML003", f"not UTF-8 text (bad byte at offset {exc.start})", name) from None
-    return parse_yaml_text(text, name)
+        raise SdnnError.at("YAML003", f"not UTF-8 text (bad byte 0x{raw[exc.start]:02x} at offset {exc.start})",
+                           name, raw.count(b"\n", 0, exc.start) + 1) from None
+    doc = parse_yaml_text(text, name)
+    # hash the bytes that were parsed: reading the file a second time could see a different file
+    return dataclasses.replace(doc, sha256=hashlib.sha256(raw).hexdigest())
 
 
 def _check_nesting(text: str, name: str) -> None:
@@ -123,9 +155,49 @@ def parse_yaml_text(text: str, name: str = "<chart>") -> LocatedYaml:
         raise SdnnError.at("YAML004", "more than one YAML document ('---'); a chart is one document", name, line)
     if not nodes or nodes[0] is None:
         raise SdnnError.at("YAML006", "empty file, expected a chart (a mapping with 'sdnn: 1')", name, 1)
+    _check_expansion(nodes[0], name)
     builder = _Builder(name)
     data = builder.build(nodes[0], (), 0)
     return LocatedYaml(name, data, builder.marks)
+
+
+def _check_expansion(root: yaml.Node, name: str) -> None:
+    """Refuse an alias bomb before expanding it: count the values each node expands to, once per node.
+
+    A billion-laughs document has a few dozen nodes that expand to 10^9 values; the builder would spend a
+    second reaching its limit, this takes microseconds. A node that contains itself (``&a [*a]``) is refused.
+    """
+    sizes: dict[int, int] = {}
+
+    def size(node: yaml.Node) -> int:
+        key = id(node)
+        if key in sizes:
+            if sizes[key] < 0:
+                raise SdnnError.at("YAML005", "an alias refers to a collection that contains it (a recursive "
+                                   "alias)", name, node.start_mark.line + 1)
+            return sizes[key]
+        sizes[key] = -1  # in progress
+        if isinstance(node, yaml.MappingNode):
+            total = 1 + sum(size(k) + size(v) for k, v in node.value)
+        elif isinstance(node, yaml.SequenceNode):
+            total = 1 + sum(size(v) for v in node.value)
+        else:
+            total = 1
+        sizes[key] = min(total, 10 * MAX_NODES)  # saturate: big numbers cost time too
+        return sizes[key]
+
+    if size(root) <= MAX_NODES:
+        return
+    node = root  # point at the smallest collection that alone expands past the limit
+    while True:
+        children = ([c for kv in node.value for c in kv] if isinstance(node, yaml.MappingNode)
+                    else node.value if isinstance(node, yaml.SequenceNode) else [])
+        big = [c for c in children if sizes.get(id(c), 0) > MAX_NODES]
+        if not big:
+            break
+        node = big[0]
+    raise SdnnError.at("YAML005", f"more than {MAX_NODES} values after expanding aliases (an alias bomb?)", name,
+                       node.start_mark.line + 1)
 
 
 class _Builder:

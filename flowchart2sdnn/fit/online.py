@@ -23,7 +23,7 @@ from ..network import online_kernel as ok
 from ..network.runtime import CompiledNetwork
 from .transforms import Bounds
 
-__all__ = ["OnlineOptions", "OnlineResult", "quasi_online", "STATUS_MESSAGES"]
+__all__ = ["OnlineOptions", "OnlineResult", "OnlineRun", "quasi_online", "STATUS_MESSAGES"]
 
 #: Status code -> message; ``OnlineResult.message`` starts with one of these.
 STATUS_MESSAGES: dict[str, str] = {
@@ -60,7 +60,7 @@ class OnlineOptions:
     mu_max: float = 1e10
     mu_min: float = 1e-12
     record_every: int = 100
-    block: int = 1000
+    block: int = 500
     chunk: int = 5000
 
     def __post_init__(self) -> None:
@@ -134,28 +134,113 @@ def _readonly(a) -> np.ndarray:
     return a
 
 
-def _check_targets(targets, n_samples: int, compiled: CompiledNetwork) -> np.ndarray:
+def _checked(a, what: str, columns: tuple[str, ...], n_samples: int | None) -> np.ndarray:
+    """`a` as a C-contiguous float (L, len(columns)) array (a view when possible), finite.
+
+    The finiteness check runs in slices so that no temporary grows with the record length.
+    """
     try:
-        y = np.ascontiguousarray(targets, dtype=float)
+        arr = np.ascontiguousarray(a, dtype=float)
     except (TypeError, ValueError) as exc:
-        raise ValueError(f"targets must be a numeric array: {exc}") from None
-    if y.ndim == 1 and compiled.n_outputs == 1:
-        y = y[:, None].copy()
-    if y.shape != (n_samples, compiled.n_outputs):
-        raise ValueError(f"targets has shape {y.shape}, expected ({n_samples}, {compiled.n_outputs}) with "
-                         f"columns {list(compiled.output_names)}")
-    bad = ~np.isfinite(y)
-    if bad.any():
-        q, i = np.argwhere(bad)[0]
-        raise ValueError(f"targets contain {int(bad.sum())} non-finite value(s), first at sample {q} of "
-                         f"{compiled.output_names[i]!r}")
-    return y
+        raise ValueError(f"{what} must be a numeric array: {exc}") from None
+    if arr.ndim == 1 and len(columns) == 1:
+        arr = arr[:, None]
+    if arr.ndim != 2 or arr.shape[1] != len(columns) or (n_samples is not None and arr.shape[0] != n_samples):
+        rows = "L" if n_samples is None else str(n_samples)
+        raise ValueError(f"{what} has shape {arr.shape}, expected ({rows}, {len(columns)}) with columns "
+                         f"{list(columns)}")
+    if arr.shape[0] == 0:
+        raise ValueError(f"{what} has no samples")
+    for start in range(0, arr.shape[0], _SLICE):
+        part = arr[start:start + _SLICE]
+        bad = ~np.isfinite(part)
+        if bad.any():
+            q, i = np.argwhere(bad)[0]
+            raise ValueError(f"{what} contain a non-finite value at sample {start + q} of {columns[i]!r}")
+    return arr
+
+
+_SLICE = 65536
 
 
 def _bound_codes(bounds: Bounds) -> np.ndarray:
     lo, hi = np.isfinite(bounds.lower), np.isfinite(bounds.upper)
     codes = np.where(lo & hi, 3, np.where(lo, 1, np.where(hi, 2, 0)))
     return codes.astype(np.int64)
+
+
+class OnlineRun:
+    """A quasi-online run that can be advanced sample by sample (what :func:`quasi_online` drives).
+
+    Validates the arguments (see :func:`quasi_online`) and allocates the state; :meth:`advance` runs the
+    kernel, :meth:`result` packs an :class:`OnlineResult`. Exposed for tests and tools that inspect the
+    window (:attr:`state`) or the current trial (:meth:`trial_theta`).
+    """
+
+    def __init__(self, compiled: CompiledNetwork, inputs, targets, theta0=None, lower=None, upper=None,
+                 options: OnlineOptions = OnlineOptions(), init: Mapping[str, float] | None = None) -> None:
+        opt = options
+        self.compiled = compiled
+        self.options = opt
+        self.inputs = _checked(inputs, "inputs", compiled.input_names, None)
+        self.n_samples = self.inputs.shape[0]
+        self.targets = _checked(targets, "targets", compiled.output_names, self.n_samples)
+        names = compiled.names
+        x0 = compiled.theta0() if theta0 is None else np.array(theta0, dtype=float).reshape(-1)
+        if x0.shape != (compiled.n_theta,):
+            raise ValueError(f"`theta0` has {x0.size} entries, expected {compiled.n_theta} for {list(names)}")
+        self.bounds = Bounds.make(names, lower, upper)
+        self.bounds.check(x0, "theta0")
+        self.x0 = x0
+        flat = compiled._flat
+        self.program = ok.weight_program(compiled)
+        prog = self.program
+        self.state = ok.new_state(self.bounds.start(x0), prog.n_connections, prog.n_slots,
+                                  compiled._history(init), flat.ring, opt.window, compiled.n_outputs,
+                                  opt.average, opt.mu0)
+        self._net = (flat.conn_ptr, flat.conn_kind, flat.conn_src, flat.conn_delay, flat.transfer,
+                     compiled._dptr, compiled._dtheta, flat.output_index)
+        self._bnd = (_bound_codes(self.bounds), np.array(self.bounds.lower, dtype=float),
+                     np.array(self.bounds.upper, dtype=float))
+        self._fopt = np.array([opt.mu_inc, opt.mu_dec, opt.mu_min, opt.mu_max], dtype=float)
+        self._iopt = np.array([opt.start, opt.every, opt.block, opt.record_every, prog.stack], dtype=np.int64)
+        n_rec = -(-self.n_samples // opt.record_every)
+        self._rec_x = np.zeros((n_rec, compiled.n_theta))
+        self._rec_cost = np.zeros(n_rec)
+        self._rec_mu = np.zeros(n_rec)
+        self.diverged_at_start = not ok.prepare(self.state.model(), self.state.trial(), self._bnd, prog.exprs,
+                                                np.empty(prog.stack))
+
+    @property
+    def done(self) -> int:
+        """Samples processed so far."""
+        return int(self.state.its[ok.I_NEXT])
+
+    def advance(self, end: int) -> bool:
+        """Process the samples up to `end` (exclusive). False when the model diverged before `start`."""
+        if self.diverged_at_start:
+            return False
+        st = self.state
+        code = ok.online_chunk(self.done, min(int(end), self.n_samples), self.inputs, self.targets, self._net,
+                               self.program.exprs, self._bnd, self._fopt, self._iopt, st.model(), st.trial(),
+                               st.window(), (st.avg_x, st.avg_cost), st.fs, st.its, st.div_t, self._rec_x,
+                               self._rec_cost, self._rec_mu)
+        if code == ok.STATUS_DIVERGED_BEFORE_START:
+            self.diverged_at_start = True
+            return False
+        return True
+
+    def theta(self) -> np.ndarray:
+        """The accepted parameters (external)."""
+        return self.x0.copy() if self.diverged_at_start else self.bounds.to_external(self.state.u)
+
+    def trial_theta(self) -> np.ndarray:
+        """The current trial parameters (external): one LM step from :meth:`theta` on the current window."""
+        return self.bounds.to_external(self.state.u_tr)
+
+    def result(self, status: str) -> OnlineResult:
+        """Pack the run so far as an :class:`OnlineResult` with `status` (a key of ``STATUS_MESSAGES``)."""
+        return _result(self, status)
 
 
 def quasi_online(
@@ -187,105 +272,78 @@ def quasi_online(
     init : mapping, optional
         Output name -> value for states initialised from data.
     callback : callable ``callback(progress_fraction) -> bool | None``, optional
-        Called after each chunk with the fraction of the record processed; True stops the run.
+        Called after each chunk of ``options.chunk`` samples with the fraction of the record processed;
+        returning True stops the run.
 
     Returns
     -------
     OnlineResult
         Whatever happens (divergence, Ctrl-C between chunks), finite values within bounds.
-    """
-    opt = options
-    u_in = compiled._check_inputs(inputs)
-    n_samples = u_in.shape[0]
-    y = _check_targets(targets, n_samples, compiled)
-    names = compiled.names
-    x0 = compiled.theta0() if theta0 is None else np.array(theta0, dtype=float).reshape(-1)
-    if x0.shape != (compiled.n_theta,):
-        raise ValueError(f"`theta0` has {x0.size} entries, expected {compiled.n_theta} for {list(names)}")
-    bounds = Bounds.make(names, lower, upper)
-    bounds.check(x0, "theta0")
-    history = compiled._history(init)
-    flat = compiled._flat
-    prog = ok.weight_program(compiled)
-    state = ok.new_state(bounds.start(x0), prog.n_connections, prog.n_slots, history, flat.ring, opt.window,
-                         compiled.n_outputs, opt.average, opt.mu0)
-    net = (flat.conn_ptr, flat.conn_kind, flat.conn_src, flat.conn_delay, flat.transfer, compiled._dptr,
-           compiled._dtheta, flat.output_index)
-    bnd = (_bound_codes(bounds), np.array(bounds.lower, dtype=float), np.array(bounds.upper, dtype=float))
-    fopt = np.array([opt.mu_inc, opt.mu_dec, opt.mu_min, opt.mu_max], dtype=float)
-    iopt = np.array([opt.start, opt.every, opt.block, opt.record_every, prog.stack], dtype=np.int64)
-    n_rec = -(-n_samples // opt.record_every)
-    rec_x = np.zeros((n_rec, compiled.n_theta))
-    rec_cost = np.zeros(n_rec)
-    rec_mu = np.zeros(n_rec)
 
+    Raises
+    ------
+    ValueError
+        Bad shapes, non-finite data, `theta0` outside the bounds, a missing data-initialised state.
+    """
+    run = OnlineRun(compiled, inputs, targets, theta0, lower, upper, options, init)
     status = None
-    done = 0
-    if not ok.set_params(state.model(), bnd, prog.exprs, np.empty(prog.stack)):
-        status = "diverged_at_start"
     try:
-        while status is None and done < n_samples:
-            end = min(done + opt.chunk, n_samples)
-            code = ok.online_chunk(done, end, u_in, y, net, prog.exprs, bnd, fopt, iopt, state.model(),
-                                   state.window(), (state.avg_x, state.avg_cost), state.fs, state.its,
-                                   state.div_t, rec_x, rec_cost, rec_mu)
-            done = int(state.its[ok.I_NEXT])  # from the state: exact even if Ctrl-C lands right here
-            if code == ok.STATUS_DIVERGED_BEFORE_START:
+        while status is None and run.done < run.n_samples:
+            if not run.advance(run.done + options.chunk):
                 status = "diverged_at_start"
-                break
-            if callback is not None and callback(done / n_samples) and done < n_samples:
+            elif callback is not None and callback(run.done / run.n_samples) and run.done < run.n_samples:
                 status = "callback_stop"
-        if status is None:
-            status = "completed" if n_samples > opt.start else "not_started"
+        if run.diverged_at_start:
+            status = "diverged_at_start"
+        elif status is None:
+            status = "completed" if run.n_samples > options.start else "not_started"
     except KeyboardInterrupt:
         status = "interrupted"
-        done = int(state.its[ok.I_NEXT])
-    return _result(compiled, bounds, x0, state, status, done, rec_x, rec_cost, rec_mu, opt)
+    return run.result(status)
 
 
-def _result(compiled, bounds, x0, state, status, done, rec_x, rec_cost, rec_mu, opt) -> OnlineResult:
-    its = state.its
+def _result(run: OnlineRun, status: str) -> OnlineResult:
+    st, opt, bounds = run.state, run.options, run.bounds
+    its = st.its
+    done = run.done
     steps = int(its[ok.I_STEPS])
     n_avg = min(steps, opt.average)
-    if status == "diverged_at_start":
-        x_final = np.array(x0, dtype=float)
-    else:
-        x_final = bounds.to_external(state.u)
+    x_final = run.theta()
     if n_avg > 0:
-        theta_mean = state.avg_x[:n_avg].mean(axis=0)
-        mean_cost = float(state.avg_cost[:n_avg].mean())
+        theta_mean = st.avg_x[:n_avg].mean(axis=0)
+        mean_cost = float(st.avg_cost[:n_avg].mean())
     else:
         theta_mean = x_final
-        mean_cost = 0.5 * max(float(state.fs[ok.F_EE]), 0.0)
-    # the bounds hold for every averaged value, hence for the mean; clip only the rounding of the average
+        mean_cost = 0.5 * max(float(st.fs[ok.F_EE]), 0.0)
+    # every averaged value lies within the bounds, so does the mean; clip only the rounding of the average
     theta_mean = np.clip(theta_mean, bounds.lower, bounds.upper)
     n_rec = -(-done // opt.record_every)
-    T = float(compiled.net.sample_time)
+    T = float(run.compiled.net.sample_time)
     times = np.arange(n_rec) * opt.record_every * T
-    mu = float(state.fs[ok.F_MU])
+    mu = float(st.fs[ok.F_MU])
     message = (f"{STATUS_MESSAGES[status]} ({steps} LM steps over {done} samples; mean window cost "
-               f"{mean_cost:.6g} over the last {n_avg} steps; mu {mu:.3g}; blocks accepted "
-               f"{int(its[ok.I_ACCEPTED])}, rejected {int(its[ok.I_REJECTED])}; divergences "
+               f"{mean_cost:.6g} over the last {n_avg} steps; mu {mu:.3g}; trials accepted "
+               f"{int(its[ok.I_ACCEPTED])}, refused {int(its[ok.I_REJECTED])}; divergences "
                f"{int(its[ok.I_DIVERGED])})")
     return OnlineResult(
-        names=compiled.names,
+        names=run.compiled.names,
         theta_mean=_readonly(theta_mean),
         theta_final=_readonly(x_final),
         steps=steps,
         status=status,
         message=message,
         trajectory_time=_readonly(times),
-        trajectory=_readonly(rec_x[:n_rec]),
+        trajectory=_readonly(run._rec_x[:n_rec]),
         cost_time=_readonly(times),
-        cost=_readonly(rec_cost[:n_rec]),
+        cost=_readonly(run._rec_cost[:n_rec]),
         mean_cost=mean_cost,
-        mu_trajectory=_readonly(rec_mu[:n_rec]),
+        mu_trajectory=_readonly(run._rec_mu[:n_rec]),
         samples=done,
         averaged_steps=n_avg,
         accepted_blocks=int(its[ok.I_ACCEPTED]),
         rejected_blocks=int(its[ok.I_REJECTED]),
         diverged=int(its[ok.I_DIVERGED]),
-        divergence_time=_readonly(state.div_t[: int(its[ok.I_N_DIV_T])] * T),
+        divergence_time=_readonly(st.div_t[: int(its[ok.I_N_DIV_T])] * T),
         chol_fallbacks=int(its[ok.I_CHOL_FALLBACK]),
         skipped_steps=int(its[ok.I_SKIPPED]),
         mu_final=mu,

@@ -3,13 +3,44 @@
 from __future__ import annotations
 
 import json
+import signal
 import sys
+import threading
 import time
 from pathlib import Path
 
 import click
 
-__all__ = ["register", "Progress"]
+__all__ = ["register", "Progress", "CtrlC"]
+
+
+class CtrlC:
+    """The first Ctrl-C only asks the run to stop (it then writes the best result so far); a second one aborts.
+
+    A KeyboardInterrupt raised at an arbitrary point (inside numba code, while computing the uncertainty)
+    could lose the whole run, so SIGINT sets a flag that the trainer polls between iterations instead.
+    Only the main thread can own signal handlers; elsewhere this is an inert flag.
+    """
+
+    def __init__(self) -> None:
+        self.requested = False
+        self._previous = None
+        if threading.current_thread() is threading.main_thread():
+            self._previous = signal.signal(signal.SIGINT, self._handle)
+
+    def _handle(self, signum, frame) -> None:
+        if self.requested:
+            self.restore()
+            raise KeyboardInterrupt
+        self.requested = True
+
+    def __call__(self) -> bool:
+        return self.requested
+
+    def restore(self) -> None:
+        if self._previous is not None:
+            signal.signal(signal.SIGINT, self._previous)
+            self._previous = None
 
 
 class Progress:
@@ -50,7 +81,7 @@ def register(main: click.Group) -> None:
     from ..cli import handle_errors
 
     @main.command()
-    @click.argument("data", type=click.Path(dir_okay=False))
+    @click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
     @click.option("--diagram", "chart", required=True, type=click.Path(dir_okay=False), help="The chart (YAML).")
     @click.option("-o", "--output", type=click.Path(dir_okay=False),
                   help="RESULT.json; the identified chart is written beside it as RESULT.chart.yaml.")
@@ -72,16 +103,24 @@ def register(main: click.Group) -> None:
                   help="zoh: input sample k acts on [t_k, t_k+1) (logged data); direct: output k uses input k.")
     @click.option("--map", "mapping", multiple=True, metavar="NAME=COLUMN",
                   help="Take chart signal NAME from CSV column COLUMN (repeatable).")
-    @click.option("--plots", type=click.Path(file_okay=False), help="Directory for plots (needs matplotlib).")
+    @click.option("--plots", type=click.Path(file_okay=False),
+                  help="Directory for the figures (PNG; created if needed, figures of the same name replaced). "
+                       "Needs matplotlib: pip install flowchart2sdnn[plots].")
     @click.option("--force", is_flag=True, help="Overwrite existing output files.")
     @click.option("--quiet", is_flag=True, help="No progress and no table.")
+    @click.option("--workers", type=click.IntRange(min=1),
+                  help="Run the multi-start fits in N local worker processes.")
+    @click.option("--scheduler", metavar="ADDRESS",
+                  help="Run the multi-start fits on a Dask cluster (tcp://host:8786, or 'local').")
     @handle_errors
     def identify(data, chart, output, fix_from, validation, split, starts, seed, online, window, average,
-                 max_iter, alignment, mapping, plots, force, quiet) -> None:
-        """Identify the physical parameters of the chart from measured DATA (CSV)."""
+                 max_iter, alignment, mapping, plots, force, quiet, workers=None, scheduler=None) -> None:
+        """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
+        together, each simulated from its own initial state)."""
         from ..atomic import atomic_write_text, check_output_path
         from ..data.csvdata import parse_mapping, read_csv
         from ..diagram.validate import load_diagram
+        from ..errors import SdnnError
         from .chartio import dump_diagram, fix_from_result
         from .problem import required_columns
         from .report import format_result
@@ -90,7 +129,11 @@ def register(main: click.Group) -> None:
 
         if validation and split:
             raise click.UsageError("give either --validate or --split, not both")
-        inputs = [data, chart] + [p for p in (fix_from, validation) if p]
+        inputs = [*data, chart] + [p for p in (fix_from, validation) if p]
+        if plots:
+            from .plots import require_matplotlib
+
+            require_matplotlib()  # before any work: a missing extra must not cost a whole run
         chart_out = None
         if output:
             chart_out = str(Path(output).with_suffix("")) + ".chart.yaml"
@@ -102,21 +145,37 @@ def register(main: click.Group) -> None:
             diagram, fixed = fix_from_result(diagram, fix_from)
         maps = parse_mapping(mapping)
         cols = required_columns(diagram)
-        train = read_csv(data, cols, maps, diagram.sample_time)
+        train = [read_csv(d, cols, maps, diagram.sample_time) for d in data]
         val = read_csv(validation, cols, maps, diagram.sample_time) if validation else None
         settings = IdentifySettings(starts=starts, seed=seed, max_iter=max_iter, alignment=alignment, split=split,
                                     online=online, window=window, average=average, fixed_from=tuple(fixed))
         progress = Progress(quiet)
+        ctrl_c = CtrlC()  # until the files are written: restored when the click context closes
+        click.get_current_context().call_on_close(ctrl_c.restore)
         try:
-            outcome = run_identify(diagram, train, val, settings, progress)
+            if workers is None and scheduler is None:
+                outcome = run_identify(diagram, train, val, settings, progress, stop=ctrl_c)
+            else:
+                from ..parallel import make_executor
+
+                with make_executor(workers, scheduler) as executor:
+                    outcome = run_identify(diagram, train, val, settings, progress, executor=executor,
+                                           stop=ctrl_c)
         finally:
             progress.close()
         result = outcome.result
-        result["command"] = {"data": data, "diagram": chart, "fix_from": fix_from, "validate": validation}
+        if result["status"] == "diverged_at_start":
+            raise SdnnError.at("FIT001", result["message"], chart,
+                               hint="the start values make the model unstable on this data: change 'init'")
+        result["command"] = {"data": data[0] if len(data) == 1 else list(data), "diagram": chart, "fix_from": fix_from, "validate": validation,
+                             "map": dict(maps)}
         if output:
             result["identified_chart"] = chart_out
-            atomic_write_text(chart_out, dump_diagram(outcome.diagram, {"from": output, "status": result["status"]}))
-            atomic_write_text(output, json.dumps(result, indent=1, allow_nan=False) + "\n")
+            # both texts first: a failure here must not leave one file without the other
+            chart_text = dump_diagram(outcome.diagram, {"from": output, "status": result["status"]})
+            result_text = json.dumps(result, indent=1, allow_nan=False) + "\n"
+            atomic_write_text(chart_out, chart_text)
+            atomic_write_text(output, result_text)
         if plots:
             from .plots import write_plots
 
@@ -126,4 +185,6 @@ def register(main: click.Group) -> None:
             if output:
                 click.echo(f"wrote {output} and {chart_out}")
         if result["status"] == "interrupted":
+            click.echo(f"interrupted: {'the best result so far is in ' + output if output else 'no -o, nothing written'}",
+                       err=True)
             sys.exit(1)

@@ -2,8 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Mapping
-from dataclasses import dataclass
+from collections.abc import Mapping, Sequence
+from contextlib import contextmanager
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -14,12 +15,14 @@ from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..network.model import Network
 from ..network.runtime import CompiledNetwork
-from ..network.stability import chatter_radius
+from ..network.stability import rest_radii
 
-__all__ = ["Problem", "build_problem", "metrics", "data_init", "required_columns", "CHATTER_LIMIT"]
+__all__ = ["Problem", "Segment", "build_problem", "metrics", "data_init", "required_columns", "CHATTER_LIMIT"]
 
 #: A trial step whose network chatters at rest (see network.stability) by more than this is rejected.
 CHATTER_LIMIT = 1.0 + 1e-9
+#: ... or that drifts away from rest faster than 1 % a sample (e-fold in 100 samples: no drive does that).
+GROWTH_LIMIT = 1.01
 
 
 def required_columns(diagram: Diagram) -> list[str]:
@@ -31,6 +34,33 @@ def data_init(network: Network, data: Dataset) -> dict[str, float]:
     return {s.data: float(data.columns[s.data][0]) for s in network.initial_states if s.data}
 
 
+@contextmanager
+def _interruptible():
+    """Let Ctrl-C inside a numba kernel surface as KeyboardInterrupt (the trainer's clean stop).
+
+    A SIGINT that arrives while compiled code runs is raised when numba next calls back into Python, where it
+    cannot propagate and comes out as a SystemError whose cause is the KeyboardInterrupt.
+    """
+    try:
+        yield
+    except SystemError as exc:
+        cause = exc
+        while cause is not None and not isinstance(cause, KeyboardInterrupt):
+            cause = cause.__cause__ or cause.__context__
+        if cause is None:
+            raise
+        raise KeyboardInterrupt from exc
+
+
+@dataclass(frozen=True, eq=False)
+class Segment:
+    """One more training record of a problem: its network inputs, fitted targets and data initial states."""
+
+    inputs: np.ndarray
+    targets: np.ndarray
+    init: Mapping[str, float]
+
+
 @dataclass(frozen=True, eq=False)
 class Problem:
     diagram: Diagram
@@ -40,6 +70,11 @@ class Problem:
     targets: np.ndarray  # measured outputs on the fitted rows (Q', n_out)
     init: Mapping[str, float]
     alignment: str
+    # rest-stability radii a trial step may reach: the limits, or the start's own when it is already worse
+    # (a fit that starts unstable must be free to move towards stability, not be frozen by the guard)
+    stability_floor: tuple[float, float] = (0.0, 0.0)
+    # further training records, each simulated from its own initial state; residuals are concatenated
+    extra: tuple[Segment, ...] = ()
 
     @property
     def names(self) -> tuple[str, ...]:
@@ -47,30 +82,52 @@ class Problem:
 
     @property
     def n_residuals(self) -> int:
-        return int(self.targets.size)
+        return int(sum(s.targets.size for s in self.segments))
+
+    @property
+    def segments(self) -> tuple[Segment, ...]:
+        return (Segment(self.inputs, self.targets, self.init),) + self.extra
 
     def fun(self, x: np.ndarray):
         """(e, J) for LM: e = y - yhat flattened, J = d yhat / d x. None when the simulation diverges."""
-        yhat, jac = self.compiled.jacobian(x, self.inputs, self.init)
-        if not np.all(np.isfinite(yhat)) or not np.all(np.isfinite(jac)):
-            return None
-        return (self.targets - yhat).ravel(), jac.reshape(-1, jac.shape[-1])
+        es, js = [], []
+        for s in self.segments:
+            with _interruptible():
+                yhat, jac = self.compiled.jacobian(x, s.inputs, s.init)
+            if not np.all(np.isfinite(yhat)) or not np.all(np.isfinite(jac)):
+                return None
+            es.append((s.targets - yhat).ravel())
+            js.append(jac.reshape(-1, jac.shape[-1]))
+        if len(es) == 1:
+            return es[0], js[0]
+        return np.concatenate(es), np.vstack(js)
 
     def residual(self, x: np.ndarray):
-        yhat = self.compiled.simulate(x, self.inputs, self.init)
-        if not np.all(np.isfinite(yhat)):
-            return None
-        return (self.targets - yhat).ravel()
+        es = []
+        for s in self.segments:
+            with _interruptible():
+                yhat = self.compiled.simulate(x, s.inputs, s.init)
+            if not np.all(np.isfinite(yhat)):
+                return None
+            es.append((s.targets - yhat).ravel())
+        return es[0] if len(es) == 1 else np.concatenate(es)
+
+    def stability(self, x: np.ndarray) -> tuple[float, float]:
+        """(chatter, growth) radii of the network linearized at rest (see network.stability.rest_radii)."""
+        params, free = self.compiled.values(x)
+        return rest_radii(self.network, self.network.weight_values(params, free))
 
     def chatter(self, x: np.ndarray) -> float:
-        params, free = self.compiled.values(x)
-        return chatter_radius(self.network, self.network.weight_values(params, free))
+        return self.stability(x)[0]
 
     def guard(self, x: np.ndarray) -> str | None:
-        r = self.chatter(x)
-        if r > CHATTER_LIMIT:
-            return (f"the network would chatter at rest (eigenvalue {-r:.3f}): a learned curve is steeper than the "
-                    "sample time allows (about 2*J/T)")
+        chatter, growth = self.stability(x)
+        if chatter > max(CHATTER_LIMIT, self.stability_floor[0]):
+            return (f"the network would chatter at rest (eigenvalue {-chatter:.3f}): a curve in a feedback loop is "
+                    "steeper than the sample time allows (about 2*J/T)")
+        if growth > max(GROWTH_LIMIT, self.stability_floor[1]):
+            return (f"the network would drift away from rest (eigenvalue {growth:.3f}): a curve in a feedback loop "
+                    "has a negative slope at zero (it would feed energy in)")
         return None
 
 
@@ -79,18 +136,40 @@ def _stack(data: Dataset, names) -> np.ndarray:
 
 
 def build_problem(diagram: Diagram, data: Dataset, alignment: str = "zoh", seed: int = 0,
-                  network: Network | None = None) -> Problem:
-    """Compile `diagram` (unless `network` is given) and align `data` to it."""
+                  network: Network | None = None, more: Sequence[Dataset] = ()) -> Problem:
+    """Compile `diagram` (unless `network` is given) and align `data` (and the records in `more`) to it."""
     if network is None:
         network = compile_diagram(diagram, seed=seed).network
-    compiled = CompiledNetwork(network)
+    first = _one_problem(diagram, network, CompiledNetwork(network), data, alignment)
+    extra = tuple(Segment(p.inputs, p.targets, p.init)
+                  for p in (_one_problem(diagram, network, first.compiled, d, alignment) for d in more))
+    return replace(first, extra=extra) if extra else first
+
+
+def _one_problem(diagram: Diagram, network: Network, compiled: CompiledNetwork, data: Dataset,
+                 alignment: str) -> Problem:
     u = _stack(data, network_input_names(network))
     y = _stack(data, compiled.output_names)
     rows = fitted_rows(data.n_rows, alignment)
     p = network_inputs(u, alignment)
     if len(p) < 2:
         raise SdnnError.at("DATA001", f"only {data.n_rows} rows: too few samples to identify anything", data.path)
+    _check_magnitude(data, network_input_names(network) + list(compiled.output_names))
     return Problem(diagram, network, compiled, p, y[rows], data_init(network, data), alignment)
+
+
+def _check_magnitude(data: Dataset, names) -> None:
+    """Refuse values whose squares overflow: the cost of eq. (4) could not even be evaluated."""
+    for name in dict.fromkeys(names):
+        values = np.asarray(data.columns[name], dtype=float)
+        with np.errstate(over="ignore", invalid="ignore"):
+            total = float(np.sum(values * values))
+        if not np.isfinite(total):
+            k = int(np.argmax(np.abs(values)))
+            column = data.source_columns.get(name, name)
+            raise SdnnError.at("DATA002", f"column '{column}': values up to {values[k]:.3g} are too large to "
+                               "square (expected magnitudes below about 1e150)", data.path,
+                               hint="rescale the data (another unit)")
 
 
 def network_input_names(network: Network) -> list[str]:
@@ -106,17 +185,22 @@ def metrics(compiled: CompiledNetwork, x: np.ndarray, data: Dataset, alignment: 
     init = data_init(network, data) if init is None else init
     yhat = run_aligned(compiled, x, u, alignment, init)
     start = max(score_from, fitted_rows(data.n_rows, alignment).start)
-    e = y[start:] - yhat[start:]
-    finite = bool(np.all(np.isfinite(e)))
-    out = {"rows": int(len(e)), "cost": float(0.5 * np.sum(e**2)) if finite else None, "rms": {}, "fit_percent": {}}
-    for i, name in enumerate(compiled.output_names):
-        ei = e[:, i]
-        yi = y[start:, i]
-        if not finite or len(ei) == 0:
-            out["rms"][name] = None
-            out["fit_percent"][name] = None
-            continue
-        out["rms"][name] = float(np.sqrt(np.mean(ei**2)))
-        spread = np.linalg.norm(yi - yi.mean())
-        out["fit_percent"][name] = float(100.0 * (1.0 - np.linalg.norm(ei) / spread)) if spread > 0 else None
+    with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
+        e = y[start:] - yhat[start:]
+        out = {"rows": int(len(e)), "cost": _finite(0.5 * np.sum(e**2)), "rms": {}, "fit_percent": {}}
+        for i, name in enumerate(compiled.output_names):
+            ei = e[:, i]
+            yi = y[start:, i]
+            if len(ei) == 0:
+                out["rms"][name] = out["fit_percent"][name] = None
+                continue
+            out["rms"][name] = _finite(np.sqrt(np.mean(ei**2)))
+            spread = np.linalg.norm(yi - yi.mean())
+            out["fit_percent"][name] = _finite(100.0 * (1.0 - np.linalg.norm(ei) / spread)) if spread > 0 else None
     return out
+
+
+def _finite(value) -> float | None:
+    """A metric as a float, or None when it is NaN or infinite (a diverged free run): never NaN in JSON."""
+    value = float(value)
+    return value if np.isfinite(value) else None

@@ -8,20 +8,23 @@ reproduce the run. Never prints: progress goes through `progress(text, fraction)
 
 from __future__ import annotations
 
+import functools
+import math
 import platform
-from collections.abc import Callable
-from dataclasses import asdict, dataclass, field
+from collections.abc import Callable, Sequence
+from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 
 from .. import __version__
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
+from ..errors import SdnnError
 from ..fit.lm import LMOptions, LMResult, levenberg_marquardt
 from ..fit.multistart import draw_starts, run_multistart
 from ..fit.uncertainty import covariance
 from .chartio import RESULT_FORMAT, with_values
-from .problem import Problem, build_problem, metrics
+from .problem import CHATTER_LIMIT, GROWTH_LIMIT, Problem, build_problem, metrics
 
 __all__ = ["IdentifySettings", "Identification", "identify", "RESULT_VERSION"]
 
@@ -92,20 +95,38 @@ def _nonlinear_weights(problem: Problem, x: np.ndarray) -> dict[str, dict]:
     return out
 
 
-def identify(diagram: Diagram, train: Dataset, validation: Dataset | None = None,
+@np.errstate(all="ignore")  # a diverging trial is expected and handled: no RuntimeWarnings on stderr
+def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: Dataset | None = None,
              settings: IdentifySettings = IdentifySettings(),
-             progress: Callable[[str, float | None], None] | None = None) -> Identification:
+             progress: Callable[[str, float | None], None] | None = None,
+             executor=None, stop: Callable[[], bool] | None = None) -> Identification:
+    """Identify the chart's free quantities from `train`; see the module docstring.
+
+    `executor` (a :mod:`flowchart2sdnn.parallel` executor, optional) runs the multi-start fits in worker
+    processes or on a Dask cluster; the result is the same as without it (progress then comes per start).
+    `stop` (optional) is polled after each LM iteration, start and online chunk; when it returns True the
+    run ends early with status "interrupted" and the best point so far (the CLI's Ctrl-C).
+    Several training records (a sequence) are fitted together, each simulated from its own initial state.
+    """
+    records = [train] if isinstance(train, Dataset) else list(train)
+    if not records:
+        raise ValueError("identify needs at least one training record")
+    train, more = records[0], records[1:]
+    if more and (settings.split is not None or settings.online or executor is not None):
+        raise SdnnError.at("DATA003", "several training records cannot be combined with --split, --online or "
+                           "--workers/--scheduler (yet)", more[0].path, hint="give one record, or drop that option")
     full = train
     if settings.split is not None:
         if validation is not None:
             raise ValueError("give either a validation file or a split, not both")
         n_train = max(3, int(round(settings.split * train.n_rows)))
         train = full.slice(0, n_train)
-    problem = build_problem(diagram, train, settings.alignment, settings.seed)
+    problem = build_problem(diagram, train, settings.alignment, settings.seed, more=more)
     names = problem.names
     x0 = problem.compiled.theta0()
+    problem, warnings = _start_stability(problem, x0)
     lower, upper = _bounds(problem)
-    warnings: list[str] = []
+    warnings += _on_bound_warnings(names, x0, lower, upper)
     lm_result: LMResult | None = None
     online_result = None
     multistart_summary = None
@@ -121,7 +142,7 @@ def identify(diagram: Diagram, train: Dataset, validation: Dataset | None = None
                              average=settings.average, every=settings.every, start=settings.online_start)
         online_result = quasi_online(problem.compiled, problem.inputs, problem.targets, x0, lower, upper, opts,
                                      init=problem.init,
-                                     callback=(lambda f: progress("quasi-online", f)) if progress else None)
+                                     callback=lambda f: _online_tick(progress, stop, f))
         x = np.asarray(online_result.theta_mean, dtype=float)
         status, message = online_result.status, online_result.message
         interrupted = status == "interrupted"
@@ -136,6 +157,7 @@ def identify(diagram: Diagram, train: Dataset, validation: Dataset | None = None
                 if progress:
                     progress(f"LM iteration {it}, cost {cost:.6g}, mu {mu:.1e}",
                              min(1.0, it / max(1, settings.max_iter)))
+                return bool(stop and stop())
             return levenberg_marquardt(problem.fun, start, names, lower, upper, options, callback=callback,
                                        guard=problem.guard, residual=problem.residual)
 
@@ -143,8 +165,13 @@ def identify(diagram: Diagram, train: Dataset, validation: Dataset | None = None
             if progress and settings.starts > 1:
                 progress(f"start {i + 1}/{settings.starts}: cost {result.cost:.6g} ({result.status})",
                          (i + 1) / settings.starts)
+            return bool(stop and stop())
 
-        ms = run_multistart(fit_one, starts, callback=start_done)
+        if executor is not None:
+            from ..parallel import fit_start, fit_task
+
+            fit_one = functools.partial(fit_start, fit_task(problem, lower, upper, options))
+        ms = run_multistart(fit_one, starts, callback=start_done, executor=executor)
         lm_result = ms.best
         x = np.asarray(lm_result.x, dtype=float)
         status, message, interrupted = lm_result.status, lm_result.message, ms.interrupted or lm_result.interrupted
@@ -156,13 +183,25 @@ def identify(diagram: Diagram, train: Dataset, validation: Dataset | None = None
         if interrupted:
             status = "interrupted"
 
+    if status == "callback_stop" or message.startswith("stopped by the callback"):  # `stop`: the CLI's Ctrl-C
+        status, interrupted = "interrupted", True
+        message = "interrupted (Ctrl-C); the best point so far is returned" + _detail(message)
+    diverged = status == "diverged_at_start"
+
     # uncertainty at the final point (the Jacobian of the whole training record)
     cov = None
-    if names:
+    if names and not diverged:
         fe = problem.fun(x)
-        if fe is not None:
+        if fe is not None and not np.any(fe[1]):
+            if not interrupted:  # nothing was identified: report the start values exactly
+                status, message, x = "no_excitation", _no_excitation(problem), x0
+        elif fe is not None:
             cov = covariance(fe[1], fe[0], names=names)
-            warnings.extend(_identifiability_warnings(cov, problem))
+            if cov.available and not math.isfinite(cov.sigma2):
+                cov = None  # the residual's square overflows: no meaningful uncertainty
+            else:
+                warnings.extend(_identifiability_warnings(cov, problem))
+                rho, inflation = _coloured_residual(fe[0], len(problem.compiled.output_names))
         radius = problem.chatter(x)
         if radius > CHATTER_WARN:
             warnings.append(f"the fitted network is close to chattering at rest (eigenvalue {-radius:.3f}); a "
@@ -170,18 +209,24 @@ def identify(diagram: Diagram, train: Dataset, validation: Dataset | None = None
 
     params, free = problem.compiled.values(x)
     nonlinear = _nonlinear_weights(problem, x)
+    if cov is None or not cov.available:
+        rho, inflation = None, 1.0
     index = {n: i for i, n in enumerate(names)}
     parameters = {}
     for p in diagram.parameters:
         i = index.get(p.name)
         stderr = ci = None
         if i is not None and cov is not None and cov.available and np.isfinite(cov.stderr[i]):
-            stderr = float(cov.stderr[i])
-            ci = [float(params[p.name] - cov.ci95[i]), float(params[p.name] + cov.ci95[i])]
+            stderr = float(cov.stderr[i]) * inflation
+            half = float(cov.ci95[i]) * inflation
+            ci = [float(params[p.name] - half), float(params[p.name] + half)]
         parameters[p.name] = {"value": float(params[p.name]), "init": float(p.init), "stderr": stderr,
                               "ci95": ci, "unit": p.unit, "fixed": i is None}
 
     fit = {"train": metrics(problem.compiled, x, train, settings.alignment), "validation": None}
+    if more:
+        per_record = [fit["train"]] + [metrics(problem.compiled, x, d, settings.alignment) for d in more]
+        fit["train"] = _combined(per_record, problem, x, [train] + more, settings.alignment)
     if settings.split is not None:
         fit["validation"] = metrics(problem.compiled, x, full, settings.alignment, score_from=train.n_rows)
         fit["validation"]["note"] = "free run over the whole record, scored after the split"
@@ -203,6 +248,7 @@ def identify(diagram: Diagram, train: Dataset, validation: Dataset | None = None
         "seed": settings.seed,
         "chart": {"name": diagram.name, "file": diagram.file, "sha256": diagram.source_sha256},
         "data": {"train": _data_info(full if settings.split is not None else train),
+                 "train_records": [_data_info(d) for d in ([full] if settings.split is not None else [train] + more)],
                  "validation": _data_info(validation) if validation is not None else None},
         "versions": _versions(),
     }
@@ -222,6 +268,10 @@ def identify(diagram: Diagram, train: Dataset, validation: Dataset | None = None
             "condition_number": float(cov.condition_number) if np.isfinite(cov.condition_number) else None,
             "unidentifiable": [list(g) for g in cov.unidentifiable],
             "sigma2": cov.sigma2,
+            "residual_lag1": rho,
+            "interval_inflation": inflation,
+            "note": "stderr and ci95 are widened by interval_inflation = sqrt((1+rho)/(1-rho)) for the residual's "
+                    "lag-1 autocorrelation rho (coloured residuals carry fewer independent samples)",
         }
     if online_result is not None:
         result["online"] = {
@@ -233,7 +283,99 @@ def identify(diagram: Diagram, train: Dataset, validation: Dataset | None = None
             "cost_time": [float(t) for t in online_result.cost_time],
             "cost": [float(c) for c in online_result.cost],
         }
+    bad: list[str] = []
+    result = _json_safe(result, "", bad)
+    if bad:
+        result["warnings"].append(f"non-finite values stored as null: {', '.join(bad[:5])}"
+                                  + (f" (+{len(bad) - 5} more)" if len(bad) > 5 else ""))
     return Identification(result, identified, problem, x, lm_result, online_result)
+
+
+def _on_bound_warnings(names, x0: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> list[str]:
+    """Starts exactly on a bound: allowed, but the bound transform is flat there and such a quantity moves slowly."""
+    out = []
+    for name, x, lo, hi in zip(names, x0, lower, upper, strict=True):
+        side = "lower" if x == lo else "upper" if x == hi else None
+        if side:
+            out.append(f"{name} starts on its {side} bound ({x:g}); it can move away only slowly (the bound "
+                       "transform is flat there): start it inside the bounds")
+    return out
+
+
+def _online_tick(progress, stop, fraction: float) -> bool:
+    if progress:
+        progress("quasi-online", fraction)
+    return bool(stop and stop())
+
+
+def _detail(message: str) -> str:
+    """The parenthesised details of a trainer message ("... (iteration 3, cost 1.2, mu 0.1)")."""
+    at = message.find(" (")
+    return message[at:] if at >= 0 else ""
+
+
+def _no_excitation(problem: Problem) -> str:
+    constant = [spec.name for spec, col in zip(problem.compiled.net.inputs, problem.inputs.T, strict=True)
+                if np.ptp(col) == 0] if problem.inputs.size else []
+    why = f" (constant input: {', '.join(constant)})" if constant else ""
+    return ("the training data do not excite the model: no output depends on any free parameter or curve"
+            f"{why}; the start values are returned, nothing was identified")
+
+
+def _json_safe(obj, path: str, bad: list[str]):
+    """`obj` with every NaN/inf float replaced by None (its path noted in `bad`): RESULT.json stays strict JSON."""
+    if isinstance(obj, float):
+        if math.isfinite(obj):
+            return obj
+        bad.append(path or "(root)")
+        return None
+    if isinstance(obj, dict):
+        return {k: _json_safe(v, f"{path}.{k}" if path else str(k), bad) for k, v in obj.items()}
+    if isinstance(obj, (list, tuple)):
+        return [_json_safe(v, f"{path}[{i}]", bad) for i, v in enumerate(obj)]
+    return obj
+
+
+def _start_stability(problem: Problem, x0: np.ndarray) -> tuple[Problem, list[str]]:
+    """Check the start at rest. Chatter (a sign flip every sample) cannot be fitted away: an error. A start that
+    drifts away from rest can: warn, and let the guard accept steps no worse than the start."""
+    if not problem.names:
+        return problem, []
+    chatter, growth = problem.stability(x0)
+    if chatter > CHATTER_LIMIT:
+        raise SdnnError.at(
+            "FIT001", f"at its initial values (init) the chart's discrete network chatters at rest (eigenvalue "
+            f"{-chatter:.3f}): a curve in a feedback loop is too steep for the sample time "
+            f"T = {problem.network.sample_time:g} s (limit about 2*J/T)", problem.diagram.file,
+            hint="soften the curve (a larger eps of sign_smooth, a smaller k or init) or use a learned `nonlinear` block")
+    if growth <= GROWTH_LIMIT:
+        return problem, []
+    warning = (f"at its initial values the chart's discrete network drifts away from rest (eigenvalue {growth:.3f}): "
+               "a curve in a feedback loop has a negative slope at zero; the fit may take long to recover")
+    return replace(problem, stability_floor=(chatter, growth)), [warning]
+
+
+def _coloured_residual(residual: np.ndarray, n_outputs: int) -> tuple[float | None, float]:
+    """Lag-1 autocorrelation of the residual and the factor that widens the intervals for it.
+
+    The textbook covariance assumes white residuals; model error makes them coloured and the intervals far
+    too narrow. With an AR(1) residual of correlation rho the effective number of samples is
+    n (1 - rho) / (1 + rho), so standard errors grow by sqrt((1 + rho) / (1 - rho)).
+    """
+    e = residual.reshape(-1, n_outputs)
+    if len(e) < 3:
+        return None, 1.0
+    rhos = []
+    for i in range(n_outputs):
+        ei = e[:, i] - e[:, i].mean()
+        denom = float(ei @ ei)
+        if denom > 0:
+            rhos.append(float(ei[1:] @ ei[:-1]) / denom)
+    if not rhos:
+        return None, 1.0
+    rho = float(np.mean(rhos))
+    r = min(max(rho, 0.0), 0.999)
+    return rho, float(np.sqrt((1 + r) / (1 - r)))
 
 
 def _identifiability_warnings(cov, problem: Problem) -> list[str]:
@@ -250,6 +392,34 @@ def _identifiability_warnings(cov, problem: Problem) -> list[str]:
     for a, b, r in cov.correlated:
         if {a, b} & physical and not any({a, b} <= set(g) for g in cov.unidentifiable):
             out.append(f"{a} and {b} are almost interchangeable here (correlation {r:+.4f})")
+    return out
+
+
+def _combined(per_record: list[dict], problem: Problem, x: np.ndarray, records: list[Dataset],
+              alignment: str) -> dict:
+    """Training metrics over several records: E summed, RMS and fit % over all their scored samples."""
+    from ..alignment import fitted_rows, run_aligned
+    from .problem import data_init
+
+    names = problem.compiled.output_names
+    errors, targets = [], []
+    for d in records:
+        u = np.column_stack([np.asarray(d.columns[i.name], dtype=float) for i in problem.network.inputs])
+        y = np.column_stack([np.asarray(d.columns[n], dtype=float) for n in names])
+        rows = fitted_rows(d.n_rows, alignment)
+        yhat = run_aligned(problem.compiled, x, u, alignment, data_init(problem.network, d))
+        errors.append(y[rows] - yhat[rows])
+        targets.append(y[rows])
+    e, y = np.vstack(errors), np.vstack(targets)
+    costs = [m["cost"] for m in per_record]
+    out = {"rows": int(len(e)), "cost": None if None in costs else float(sum(costs)), "rms": {}, "fit_percent": {},
+           "records": per_record}
+    for i, name in enumerate(names):
+        finite = bool(np.all(np.isfinite(e[:, i])))
+        spread = np.linalg.norm(y[:, i] - y[:, i].mean())
+        out["rms"][name] = float(np.sqrt(np.mean(e[:, i] ** 2))) if finite else None
+        out["fit_percent"][name] = (float(100 * (1 - np.linalg.norm(e[:, i]) / spread))
+                                    if finite and spread > 0 else None)
     return out
 
 

@@ -1,35 +1,42 @@
 """The numba kernel of the quasi-online Levenberg-Marquardt run (paper section 3.1) and its weight program.
 
 One call of :func:`online_chunk` advances the run over samples ``[t0, t1)``; all state lives in arrays the
-caller allocates once (:func:`new_state`) and the kernel mutates, so a run can be split into chunks (progress,
-Ctrl-C) without changing a single number. Per sample t:
+caller allocates once (:func:`new_state`) and the kernel mutates, so a run can be cut into chunks (progress,
+Ctrl-C) without changing a single number. Two copies of the network run free alongside the record:
 
-1. RTRL step (as :func:`.kernels.jacobian_kernel`, one time step) with the *current* weights: the free-running
-   model output ``yhat(t)`` and ``S(t) = d a(t) / d x`` in external coordinates; the window row is
-   ``J_u(t) = S_out(t) * dx/du`` and the a-priori error ``e(t) = y(t) - yhat(t)``.
-2. FIFO window of the last Q rows in a ring buffer. The rows were computed with earlier parameters, so the
-   error of row q at the current internal parameters u is taken to first order,
-   ``e_q(u) = c_q - J_q (u - u_ref)`` with ``c_q = e_q + J_q (u_q - u_ref)``. The running sums
-   ``A = sum J_q^T J_q``, ``b = sum J_q^T c_q``, ``sum c_q^2`` and ``sum e_q^2`` get the new row added and the
-   leaving row subtracted; every Q pushes they are recomputed from the ring (bounding rounding drift) and
-   ``u_ref`` is moved to the current u (keeping ``c_q`` small).
-3. Every ``every`` samples from ``start`` on, one LM step ``(A + mu I) du = g`` with
-   ``g = b - A (u - u_ref) = sum J_q^T e_q(u)``, solved by Cholesky (a larger mu when not positive definite).
-   Using the stale a-priori errors instead (``g = sum J_q^T e_q``) would re-apply the same correction at every
-   sample, since the window changes by one row per step: with k = 1 the parameters would run away.
-4. mu rule (trainlm's x mu_inc / x mu_dec, decided without re-simulating the window): the samples from
-   ``start`` on are cut into blocks of ``block`` samples. A *shadow* copy of the model runs alongside with the
-   parameters frozen at the block start (a simulation only, no sensitivities). At the block end the squared
-   a-priori errors of the block are compared, both models having started the block from the same state: if the
-   stepping model did at least as well, the block's steps are accepted (``mu *= mu_dec``, the shadow takes the
-   current parameters and state); otherwise they are rejected as trainlm rejects a step: parameters and state
-   return to the shadow's, and ``mu *= mu_inc``. mu stays within ``[mu_min, mu_max]``.
-5. A non-finite output, error or sensitivity is a divergence: parameters and state return to the shadow's (to
-   the initial history when the shadow diverged too), the sensitivities restart from 0, mu is raised, the
-   sample is skipped and the event is recorded.
+* the *model*, with the accepted internal parameters u: an RTRL step per sample (as
+  :func:`.kernels.jacobian_kernel`) gives its output and ``S(t) = d a(t) / d x``; the window row is
+  ``J(t) = S_out(t) * dx/du`` with the a-priori error ``e(t) = y(t) - yhat(t)``;
+* the *trial*, with ``u_trial = u + du``, the LM step from u computed on the current window
+  (``(A + mu I) du = g``, Cholesky, a larger damping when rounding makes the matrix indefinite), recomputed
+  every ``every`` samples as the window slides. The trial is only simulated.
 
-Float state ``fs``: mu, sum e^2, sum c^2, block cost of the model, block cost of the shadow.
-Integer state ``its``: see the ``I_*`` constants.
+Window (FIFO, ring buffer of Q rows). Row q was linearised at the accepted parameters of its time, u_q, so its
+error at u is taken to first order, ``e_q(u) = c_q - J_q (u - u_ref)`` with ``c_q = e_q + J_q (u_q - u_ref)``
+(this keeps g right after u moves: the stale a-priori errors alone would ask for the same correction again at
+every sample). Running sums ``A = sum J^T J``, ``b = sum J^T c``, ``sum c^2``, ``sum e^2``: the new row is
+added, the leaving row subtracted; every Q pushes they are recomputed from the ring (bounding rounding drift)
+and ``u_ref`` moves to u. Then ``g = b - A (u - u_ref)`` and the window cost is ``E = 1/2 sum e_q^2``.
+
+mu rule (trainlm's accept/reject, decided without re-simulating the window). From ``start`` on the samples
+are cut into blocks of ``block`` samples; at each block start the trial restarts from the model's state and
+parameters. Over the block, the trial's output change is compared with its first-order prediction
+``J_blk du``, where ``J_blk`` are sensitivities of the model restarted at zero at the block start (the trial
+differs from the model since the block start only, not since t = 0): with ``lin = J_blk du`` and
+``miss = (y - yhat_trial) - (e - lin)`` summed as squares over the block, the trial is accepted when
+``sum miss^2 <= LINEARITY_TOL * sum lin^2``, i.e. when the linear model on which the LM step rests held at
+the trial point. This is the gain-ratio idea of LM/trust-region methods; the plain "did the cost go down"
+test of trainlm does not carry over, because the step minimises the window's cost, not the block's: a good
+window step may raise the cost of a short block, and a bad one may lower it by luck. Accepted: the model
+takes the trial's parameters and state, ``mu *= mu_dec``; refused: ``mu *= mu_inc``; mu stays within
+``[mu_min, mu_max]``.
+
+Divergence: a non-finite (or overflowing) trial output refuses the trial at once (``mu *= mu_inc``); a
+non-finite model output adopts the trial's parameters and state when they are finite, else restarts both from
+the history with zero sensitivities; the sample's row is skipped and the event recorded. Nothing non-finite
+ever enters the window.
+
+Float state ``fs`` and integer state ``its``: see the ``F_*`` and ``I_*`` constants.
 """
 
 from __future__ import annotations
@@ -49,21 +56,22 @@ __all__ = [
     "OnlineState",
     "new_state",
     "online_chunk",
+    "prepare",
     "eval_weights",
     "cholesky_solve",
-    "BOUND_CODES",
-    "set_params",
+    "LINEARITY_TOL",
 ]
 
 OP_CONST, OP_VAR, OP_NEG, OP_ADD, OP_SUB, OP_MUL, OP_DIV, OP_POW = range(8)
 _BINARY = {"+": OP_ADD, "-": OP_SUB, "*": OP_MUL, "/": OP_DIV, "^": OP_POW}
-#: Transform code per quantity: none, min only, max only, both (formulas of fit/transforms.py).
-BOUND_CODES = {"none": 0, "min": 1, "max": 2, "both": 3}
+#: A trial is accepted when, over its block, the part of its output change that the first-order prediction
+#: misses is at most this fraction of the predicted change (both as sums of squares).
+LINEARITY_TOL = 0.25
 
-F_MU, F_EE, F_CC, F_EM, F_ES = range(5)
+F_MU, F_EE, F_CC, F_CH, F_NL = range(5)
 (I_COUNT, I_HEAD, I_STEPS, I_BLOCK_POS, I_ACCEPTED, I_REJECTED, I_DIVERGED, I_CHOL_FALLBACK,
- I_SKIPPED, I_RESYNC, I_N_DIV_T, I_NEXT, I_BLOCK_ROWS, I_SINCE_RESYNC) = range(14)
-N_FS, N_ITS = 5, 14
+ I_SKIPPED, I_RESYNC, I_N_DIV_T, I_NEXT, I_SINCE_RESYNC) = range(13)
+N_FS, N_ITS = 5, 13
 STATUS_OK, STATUS_DIVERGED_BEFORE_START = 0, 1
 
 
@@ -279,13 +287,13 @@ def cholesky_solve(M, rhs, L, out):
 # ------------------------------------------------------------------------------------------ state
 @dataclass(frozen=True, eq=False)
 class OnlineState:
-    """Every array the kernel reads and mutates (sizes depend on Q, K, P and the network, never on the record).
+    """Every array the kernel reads and mutates; sizes depend on Q, K, P and the network, never on the record.
 
-    model:  u, x, dxdu (P,); conn_val (C,); dval (D,); a_buf (ring, N); s_buf (ring, N, P)
-    shadow: u_ck (P,); conn_ck (C,); dval_ck (D,); a_ck (ring, N); s_ck (ring, N, P)
+    model:  u, x, dxdu (P,); conn_val (C,); dval (D,); a_buf (ring, N); s_buf, s_blk (ring, N, P)
+    trial:  u_tr, x_tr, dxdu_tr (P,); conn_tr (C,); dval_tr (D,); a_tr (ring, N)
     window: win_J (Q, n_out, P); win_c, win_e (Q, n_out); A (P, P) lower triangle; b, u_ref (P,)
-    average ring over the last K steps: avg_x (K, P); avg_cost (K,)
-    scalars: fs (N_FS,) float; its (N_ITS,) int; div_t (capacity of recorded divergence times,) int
+    average over the last K LM steps: avg_x (K, P); avg_cost (K,)
+    fs (N_FS,) float; its (N_ITS,) int; div_t (capacity,) int: samples of the first divergences
     """
 
     u: np.ndarray
@@ -295,11 +303,14 @@ class OnlineState:
     dval: np.ndarray
     a_buf: np.ndarray
     s_buf: np.ndarray
-    u_ck: np.ndarray
-    conn_ck: np.ndarray
-    dval_ck: np.ndarray
-    a_ck: np.ndarray
-    s_ck: np.ndarray
+    s_blk: np.ndarray
+    u_tr: np.ndarray
+    x_tr: np.ndarray
+    dxdu_tr: np.ndarray
+    conn_tr: np.ndarray
+    dval_tr: np.ndarray
+    a_tr: np.ndarray
+    history: np.ndarray
     win_J: np.ndarray
     win_c: np.ndarray
     win_e: np.ndarray
@@ -311,11 +322,12 @@ class OnlineState:
     fs: np.ndarray
     its: np.ndarray
     div_t: np.ndarray
-    history: np.ndarray
 
     def model(self) -> tuple:
-        return (self.u, self.x, self.dxdu, self.conn_val, self.dval, self.a_buf, self.s_buf,
-                self.u_ck, self.conn_ck, self.dval_ck, self.a_ck, self.s_ck, self.history)
+        return (self.u, self.x, self.dxdu, self.conn_val, self.dval, self.a_buf, self.s_buf, self.s_blk)
+
+    def trial(self) -> tuple:
+        return (self.u_tr, self.x_tr, self.dxdu_tr, self.conn_tr, self.dval_tr, self.a_tr, self.history)
 
     def window(self) -> tuple:
         return (self.win_J, self.win_c, self.win_e, self.A, self.b, self.u_ref)
@@ -325,18 +337,8 @@ class OnlineState:
         return sum(int(getattr(self, f).nbytes) for f in self.__dataclass_fields__)
 
 
-def new_state(
-    u0: np.ndarray,
-    n_connections: int,
-    n_slots: int,
-    history: np.ndarray,
-    ring: int,
-    window: int,
-    n_outputs: int,
-    average: int,
-    mu0: float,
-    div_capacity: int = 1000,
-) -> OnlineState:
+def new_state(u0: np.ndarray, n_connections: int, n_slots: int, history: np.ndarray, ring: int, window: int,
+              n_outputs: int, average: int, mu0: float, div_capacity: int = 1000) -> OnlineState:
     """Allocate the state of a run starting at internal parameters `u0` with the network at its history."""
     p = u0.shape[0]
     n = history.shape[0]
@@ -345,34 +347,18 @@ def new_state(
     fs = np.zeros(N_FS)
     fs[F_MU] = mu0
     return OnlineState(
-        u=np.array(u0, dtype=float),
-        x=np.zeros(p),
-        dxdu=np.zeros(p),
-        conn_val=np.zeros(n_connections),
-        dval=np.zeros(n_slots),
-        a_buf=a_buf,
-        s_buf=np.zeros((ring, n, p)),
-        u_ck=np.array(u0, dtype=float),
-        conn_ck=np.zeros(n_connections),
-        dval_ck=np.zeros(n_slots),
-        a_ck=a_buf.copy(),
-        s_ck=np.zeros((ring, n, p)),
-        win_J=np.zeros((window, n_outputs, p)),
-        win_c=np.zeros((window, n_outputs)),
-        win_e=np.zeros((window, n_outputs)),
-        A=np.zeros((p, p)),
-        b=np.zeros(p),
-        u_ref=np.array(u0, dtype=float),
-        avg_x=np.zeros((average, p)),
-        avg_cost=np.zeros(average),
-        fs=fs,
-        its=np.zeros(N_ITS, dtype=np.int64),
-        div_t=np.zeros(div_capacity, dtype=np.int64),
-        history=np.array(history, dtype=float),
+        u=np.array(u0, dtype=float), x=np.zeros(p), dxdu=np.zeros(p), conn_val=np.zeros(n_connections),
+        dval=np.zeros(n_slots), a_buf=a_buf, s_buf=np.zeros((ring, n, p)), s_blk=np.zeros((ring, n, p)),
+        u_tr=np.array(u0, dtype=float), x_tr=np.zeros(p), dxdu_tr=np.zeros(p), conn_tr=np.zeros(n_connections),
+        dval_tr=np.zeros(n_slots), a_tr=a_buf.copy(), history=np.array(history, dtype=float),
+        win_J=np.zeros((window, n_outputs, p)), win_c=np.zeros((window, n_outputs)),
+        win_e=np.zeros((window, n_outputs)), A=np.zeros((p, p)), b=np.zeros(p), u_ref=np.array(u0, dtype=float),
+        avg_x=np.zeros((average, p)), avg_cost=np.zeros(average),
+        fs=fs, its=np.zeros(N_ITS, dtype=np.int64), div_t=np.zeros(div_capacity, dtype=np.int64),
     )
 
 
-# ------------------------------------------------------------------------------------------ kernel pieces
+# ------------------------------------------------------------------------------------------ network steps
 @numba.njit(cache=True, inline="always")
 def _transfer(code, n):
     if code == 0:
@@ -396,8 +382,9 @@ def _slope(code, n, a):
 
 
 @numba.njit(cache=True)
-def _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, slot_of, dn):
-    """One time step of eq. (1)-(2) and of RTRL (see :mod:`.kernels`) into slot ``t % ring``."""
+def _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2):
+    """One time step of eq. (1)-(2) and RTRL into slot ``t % ring``; also the block sensitivities `s_blk`
+    (same recursion, zero at the block start) when `with_blk`."""
     conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, _ = net
     ring = a_buf.shape[0]
     n_theta = s_buf.shape[2]
@@ -406,8 +393,9 @@ def _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, slot_of, dn):
         slot_of[d] = (t - d + ring) % ring
     for k in range(transfer.shape[0]):
         n = 0.0
-        for p in range(n_theta):
-            dn[p] = 0.0
+        dn[:] = 0.0
+        if with_blk:
+            dn2[:] = 0.0
         for c in range(conn_ptr[k], conn_ptr[k + 1]):
             kind = conn_kind[c]
             d = conn_delay[c]
@@ -416,9 +404,12 @@ def _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, slot_of, dn):
                 src_slot = slot_of[d]
                 src = conn_src[c]
                 x = a_buf[src_slot, src]
-                if t - d >= 0 and w != 0.0:  # history has zero sensitivity
+                if t - d >= 0 and w != 0.0:  # the history has zero sensitivity
                     for p in range(n_theta):
                         dn[p] += w * s_buf[src_slot, src, p]
+                    if with_blk:
+                        for p in range(n_theta):
+                            dn2[p] += w * s_blk[src_slot, src, p]
             elif kind == 1:
                 x = inputs[max(t - d, 0), conn_src[c]]
             else:
@@ -426,19 +417,43 @@ def _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, slot_of, dn):
             n += w * x
             for e in range(dptr[c], dptr[c + 1]):
                 dn[dtheta[e]] += x * dval[e]
+                if with_blk:
+                    dn2[dtheta[e]] += x * dval[e]
         a = _transfer(transfer[k], n)
         a_buf[slot, k] = a
         g = _slope(transfer[k], n, a)
         for p in range(n_theta):
             s_buf[slot, k, p] = g * dn[p]
+        if with_blk:
+            for p in range(n_theta):
+                s_blk[slot, k, p] = g * dn2[p]
 
 
 @numba.njit(cache=True)
-def _resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its):
+def _simulate_step(t, inputs, net, conn_val, a_buf, slot_of):
+    conn_ptr, conn_kind, conn_src, conn_delay, transfer, _, _, _ = net
+    ring = a_buf.shape[0]
+    for d in range(ring):
+        slot_of[d] = (t - d + ring) % ring
+    for k in range(transfer.shape[0]):
+        n = 0.0
+        for c in range(conn_ptr[k], conn_ptr[k + 1]):
+            kind = conn_kind[c]
+            if kind == 0:
+                x = a_buf[slot_of[conn_delay[c]], conn_src[c]]
+            elif kind == 1:
+                x = inputs[max(t - conn_delay[c], 0), conn_src[c]]
+            else:
+                x = 1.0
+            n += conn_val[c] * x
+        a_buf[t % ring, k] = _transfer(transfer[k], n)
+
+
+# ------------------------------------------------------------------------------------------ window
+@numba.njit(cache=True)
+def resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its):
     """Recompute the window sums from the ring (valid rows ``head - count .. head - 1``), re-referenced to u."""
-    window = win_J.shape[0]
-    n_out = win_J.shape[1]
-    n_theta = win_J.shape[2]
+    window, n_out, n_theta = win_J.shape
     A[:, :] = 0.0
     b[:] = 0.0
     cc = 0.0
@@ -456,52 +471,29 @@ def _resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its):
             cc += c * c
             ee += win_e[q, o] * win_e[q, o]
             for p in range(n_theta):
-                jp = jq[p]
-                b[p] += jp * c
                 for r in range(p + 1):
-                    A[p, r] += jp * jq[r]
-    for p in range(n_theta):
-        u_ref[p] = u[p]
+                    A[p, r] += jq[p] * jq[r]
+                b[p] += jq[p] * c
+    u_ref[:] = u
     fs[F_CC] = cc
     fs[F_EE] = ee
 
 
-@numba.njit(cache=True, inline="always")
-def _remove_row(h, win_J, win_c, win_e, A, b, fs):
-    n_out = win_J.shape[1]
-    n_theta = win_J.shape[2]
-    for o in range(n_out):
-        jo = win_J[h, o]
-        co = win_c[h, o]
-        fs[F_CC] -= co * co
-        fs[F_EE] -= win_e[h, o] * win_e[h, o]
-        for p in range(n_theta):
-            jp = jo[p]
-            b[p] -= jp * co
-            for r in range(p + 1):
-                A[p, r] -= jp * jo[r]
-
-
-@numba.njit(cache=True)
-def _pop_rows(n, win_J, win_c, win_e, A, b, fs, its):
-    """Take back the n newest rows (those of a rejected block); the window shrinks by n."""
-    window = win_J.shape[0]
-    for _ in range(min(n, its[I_COUNT])):
-        h = (its[I_HEAD] - 1 + window) % window
-        _remove_row(h, win_J, win_c, win_e, A, b, fs)
-        its[I_HEAD] = h
-        its[I_COUNT] -= 1
-
-
 @numba.njit(cache=True)
 def _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its):
-    """FIFO: drop the oldest row when the window is full, add (J, e); resync when the ring wraps."""
-    window = win_J.shape[0]
-    n_out = win_J.shape[1]
-    n_theta = win_J.shape[2]
+    """FIFO: drop the oldest row when the window is full, add (J, e); resync every Q pushes."""
+    window, n_out, n_theta = win_J.shape
     h = its[I_HEAD]
-    if its[I_COUNT] == window:
-        _remove_row(h, win_J, win_c, win_e, A, b, fs)  # when full, the oldest row sits at the head
+    if its[I_COUNT] == window:  # full: the oldest row sits at the head
+        for o in range(n_out):
+            jo = win_J[h, o]
+            co = win_c[h, o]
+            fs[F_CC] -= co * co
+            fs[F_EE] -= win_e[h, o] * win_e[h, o]
+            for p in range(n_theta):
+                for r in range(p + 1):
+                    A[p, r] -= jo[p] * jo[r]
+                b[p] -= jo[p] * co
     else:
         its[I_COUNT] += 1
     for o in range(n_out):
@@ -513,26 +505,23 @@ def _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its):
         fs[F_CC] += c * c
         fs[F_EE] += e[o] * e[o]
         for p in range(n_theta):
-            jp = J[o, p]
-            win_J[h, o, p] = jp
-            b[p] += jp * c
+            win_J[h, o, p] = J[o, p]
             for r in range(p + 1):
-                A[p, r] += jp * J[o, r]
-    its[I_BLOCK_ROWS] += 1
-    h += 1
-    if h == window:
-        h = 0
-    its[I_HEAD] = h
+                A[p, r] += J[o, p] * J[o, r]
+            b[p] += J[o, p] * c
+    its[I_HEAD] = (h + 1) % window
     its[I_SINCE_RESYNC] += 1
     if its[I_SINCE_RESYNC] >= window:
-        _resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its)
+        resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its)
         its[I_SINCE_RESYNC] = 0
         its[I_RESYNC] += 1
 
 
 @numba.njit(cache=True)
-def _lm_step(A, b, u_ref, u, mu, mu_inc, mu_max, M, L, g, delta, its):
-    """delta from (A + mu I) delta = b - A (u - u_ref); a larger mu when not positive definite. False: no step."""
+def _lm_step(A, b, u_ref, u, mu, mu_inc, M, L, g, delta, its):
+    """The LM step from u: (A + mu I) delta = g = b - A (u - u_ref) by Cholesky. When rounding makes the matrix
+    indefinite the damping grows from 1e-14 max diag(A) (it is then a numerical regularisation, not mu).
+    False when nothing works (no step)."""
     n = u.shape[0]
     diag_max = 0.0
     for p in range(n):
@@ -540,8 +529,7 @@ def _lm_step(A, b, u_ref, u, mu, mu_inc, mu_max, M, L, g, delta, its):
     for p in range(n):
         s = b[p]
         for r in range(n):
-            arc = A[p, r] if r <= p else A[r, p]
-            s -= arc * (u[r] - u_ref[r])
+            s -= (A[p, r] if r <= p else A[r, p]) * (u[r] - u_ref[r])
         g[p] = s
     m = mu
     for attempt in range(64):
@@ -553,20 +541,30 @@ def _lm_step(A, b, u_ref, u, mu, mu_inc, mu_max, M, L, g, delta, its):
             if attempt > 0:
                 its[I_CHOL_FALLBACK] += 1
             return True
-        # start the fallback at a size that can matter against A: rounding is relative to its diagonal
         m = max(m * mu_inc, 1e-14 * diag_max)
-        if m > mu_max:
+        if m > max(1e300, diag_max):
             break
     its[I_SKIPPED] += 1
     return False
 
 
+# ------------------------------------------------------------------------------------------ parameters
 @numba.njit(cache=True)
-def set_params(st, bnd, wp, stack):
-    """x, dx/du and the weights from st.u; False when a weight is not finite."""
-    u, x, dxdu, conn_val, dval = st[0], st[1], st[2], st[3], st[4]
+def _set(u, x, dxdu, conn_val, dval, bnd, wp, stack):
+    """x, dx/du and the weights at u; False when a weight is not finite."""
     _external(u, bnd[0], bnd[1], bnd[2], x, dxdu)
     return eval_weights(x, wp, conn_val, dval, stack)
+
+
+@numba.njit(cache=True)
+def prepare(st_model, st_trial, bnd, wp, stack):
+    """Weights of the model and the trial at their start parameters; False when they are not finite."""
+    u, x, dxdu, conn_val, dval = st_model[0], st_model[1], st_model[2], st_model[3], st_model[4]
+    ok = _set(u, x, dxdu, conn_val, dval, bnd, wp, stack)
+    u_tr, x_tr, dxdu_tr, conn_tr, dval_tr = st_trial[0], st_trial[1], st_trial[2], st_trial[3], st_trial[4]
+    u_tr[:] = u
+    _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)
+    return ok
 
 
 @numba.njit(cache=True)
@@ -578,30 +576,6 @@ def _all_finite(a):
 
 
 @numba.njit(cache=True)
-def _restore(st, bnd, wp, stack):
-    """Parameters, state and sensitivities back to the shadow's (to the history when it diverged too)."""
-    u, a_buf, s_buf, u_ck, a_ck, s_ck, history = st[0], st[5], st[6], st[7], st[10], st[11], st[12]
-    u[:] = u_ck
-    set_params(st, bnd, wp, stack)
-    if not (_all_finite(a_ck) and _all_finite(s_ck)):
-        for s in range(a_ck.shape[0]):
-            a_ck[s, :] = history
-        s_ck[:, :, :] = 0.0
-    a_buf[:, :] = a_ck
-    s_buf[:, :, :] = s_ck
-
-
-@numba.njit(cache=True)
-def _checkpoint(st):
-    """The shadow takes the model's parameters, weights, state and sensitivities."""
-    st[7][:] = st[0]
-    st[8][:] = st[3]
-    st[9][:] = st[4]
-    st[10][:, :] = st[5]
-    st[11][:, :, :] = st[6]
-
-
-@numba.njit(cache=True)
 def _note_divergence(t, div_t, its):
     if its[I_N_DIV_T] < div_t.shape[0]:
         div_t[its[I_N_DIV_T]] = t
@@ -610,37 +584,44 @@ def _note_divergence(t, div_t, its):
 
 
 @numba.njit(cache=True)
-def _reject(st, bnd, wp, stack, wnd, fs, its, mu_inc, mu_max):
-    """Take back the current block as trainlm takes back a step: its rows, parameters and state; raise mu."""
-    win_J, win_c, win_e, A, b, u_ref = wnd
-    _pop_rows(its[I_BLOCK_ROWS], win_J, win_c, win_e, A, b, fs, its)
-    _restore(st, bnd, wp, stack)
-    # the rejected rows may have been huge: subtracting them leaves rounding noise of their size in A
-    _resync(win_J, win_c, win_e, A, b, u_ref, st[0], fs, its)
-    its[I_SINCE_RESYNC] = 0
-    its[I_RESYNC] += 1
-    fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
-    fs[F_EM] = 0.0
-    fs[F_ES] = 0.0
+def _new_block(stm, stt, bnd, wp, stack, fs, its):
+    """The trial restarts from the model (parameters and state); block sums and sensitivities restart at 0."""
+    u, a_buf, s_blk = stm[0], stm[5], stm[7]
+    u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, a_tr = stt[0], stt[1], stt[2], stt[3], stt[4], stt[5]
+    u_tr[:] = u
+    _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)
+    a_tr[:, :] = a_buf
+    s_blk[:, :, :] = 0.0
+    fs[F_CH] = 0.0
+    fs[F_NL] = 0.0
     its[I_BLOCK_POS] = 0
-    its[I_BLOCK_ROWS] = 0
+
+
+@numba.njit(cache=True)
+def _adopt_trial(stm, stt, bnd, wp, stack):
+    """The model takes the trial's parameters and state (its sensitivities are kept: first order)."""
+    u, x, dxdu, conn_val, dval, a_buf = stm[0], stm[1], stm[2], stm[3], stm[4], stm[5]
+    u[:] = stt[0]
+    _set(u, x, dxdu, conn_val, dval, bnd, wp, stack)
+    a_buf[:, :] = stt[5]
 
 
 # ------------------------------------------------------------------------------------------ the kernel
 @numba.njit(cache=True)
-def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, st, wnd, avg, fs, its, div_t,
+def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wnd, avg, fs, its, div_t,
                  rec_x, rec_cost, rec_mu):
     """Advance the quasi-online run over samples ``[t0, t1)`` (global indices into `inputs`/`targets`).
 
     net  = (conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, output_index)
     wp   = :attr:`WeightProgram.exprs`;  bnd = (bound code (P,) int, lower (P,), upper (P,))
     fopt = [mu_inc, mu_dec, mu_min, mu_max];  iopt = [start, every, block, record_every, stack size]
-    st   = :meth:`OnlineState.model`;  wnd = :meth:`OnlineState.window`;  avg = (avg_x, avg_cost)
-    rec_x (n_rec, P), rec_cost, rec_mu (n_rec,): decimated records at samples ``t % record_every == 0``.
+    stm, stt, wnd = :meth:`OnlineState.model`, ``.trial``, ``.window``;  avg = (avg_x, avg_cost)
+    rec_x (n_rec, P), rec_cost, rec_mu (n_rec,): records at the samples ``t % record_every == 0``.
 
     Returns STATUS_OK, or STATUS_DIVERGED_BEFORE_START when the model diverged at its start parameters.
     """
-    u, x, dxdu, conn_val, dval, a_buf, s_buf, u_ck, conn_ck, dval_ck, a_ck, s_ck, history = st
+    u, x, dxdu, conn_val, dval, a_buf, s_buf, s_blk = stm
+    u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, a_tr, history = stt
     win_J, win_c, win_e, A, b, u_ref = wnd
     avg_x, avg_cost = avg
     output_index = net[7]
@@ -653,21 +634,20 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, st, wnd, avg
     stack = np.empty(iopt[4])
     slot_of = np.empty(ring, dtype=np.int64)
     dn = np.empty(n_theta)
+    dn2 = np.empty(n_theta)
     e = np.empty(n_out)
     J = np.empty((n_out, n_theta))
     M = np.empty((n_theta, n_theta))
     L = np.empty((n_theta, n_theta))
     g = np.empty(n_theta)
     delta = np.empty(n_theta)
+    u_save = np.empty(n_theta)
     for t in range(t0, t1):
-        if t == start:  # the shadow starts from the model as identification begins
-            _checkpoint(st)
-            its[I_BLOCK_ROWS] = 0
-        slot = t % ring
-        _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, slot_of, dn)
         active = t >= start
-        if active:
-            _rtrl_step(t, inputs, net, conn_ck, dval_ck, a_ck, s_ck, slot_of, dn)
+        if t == start:
+            _new_block(stm, stt, bnd, wp, stack, fs, its)
+        slot = t % ring
+        _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, active, slot_of, dn, dn2)
         sq = 0.0
         jj = 0.0
         for o in range(n_out):
@@ -678,51 +658,71 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, st, wnd, avg
                 J[o, p] = s_buf[slot, r, p] * dxdu[p]
                 jj += J[o, p] * J[o, p]
         # a row whose square, summed Q times, overflows would wreck the window sums: a divergence too
-        if not (math.isfinite(sq * window) and math.isfinite(jj * window)):
+        model_ok = math.isfinite(sq * window) and math.isfinite(jj * window)
+        trial_ok = True
+        nl = 0.0
+        ch = 0.0
+        if active:
+            _simulate_step(t, inputs, net, conn_tr, a_tr, slot_of)
+            st = 0.0
+            for o in range(n_out):
+                r = output_index[o]
+                et = targets[t, o] - a_tr[slot, r]
+                st += et * et
+                lin = 0.0  # first-order change of the output from the block sensitivities
+                for p in range(n_theta):
+                    lin += s_blk[slot, r, p] * dxdu[p] * (u_tr[p] - u[p])
+                ch += lin * lin
+                nl += (et - (e[o] - lin)) ** 2
+            trial_ok = math.isfinite(st * window) and math.isfinite(nl)
+        if not model_ok:
             if not active:
                 return STATUS_DIVERGED_BEFORE_START
             _note_divergence(t, div_t, its)
-            _reject(st, bnd, wp, stack, wnd, fs, its, mu_inc, mu_max)
+            if trial_ok:
+                _adopt_trial(stm, stt, bnd, wp, stack)
+            else:
+                for s in range(ring):
+                    a_buf[s, :] = history
+            s_buf[:, :, :] = 0.0
+            fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
+            _new_block(stm, stt, bnd, wp, stack, fs, its)
         else:
             _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its)
-            if active:
-                fs[F_EM] += sq
-                for o in range(n_out):
-                    es = targets[t, o] - a_ck[slot, output_index[o]]
-                    fs[F_ES] += es * es  # inf or nan when the shadow diverged: then the block is accepted
+            if active and not trial_ok:
+                _note_divergence(t, div_t, its)
+                its[I_REJECTED] += 1
+                fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
+                _new_block(stm, stt, bnd, wp, stack, fs, its)
+            elif active:
+                fs[F_CH] += ch
+                fs[F_NL] += nl
                 its[I_BLOCK_POS] += 1
-                if (t - start) % every == 0 and _lm_step(A, b, u_ref, u, fs[F_MU], mu_inc, mu_max, M, L, g,
-                                                         delta, its):
-                    for p in range(n_theta):
-                        u[p] += delta[p]
-                    if set_params(st, bnd, wp, stack):
-                        k = its[I_STEPS] % avg_x.shape[0]
-                        for p in range(n_theta):
-                            avg_x[k, p] = x[p]
-                        avg_cost[k] = 0.5 * max(fs[F_EE], 0.0)
-                        its[I_STEPS] += 1
-                    else:  # a gain such as 1/J2 failed at the new parameters: refuse this one step
-                        for p in range(n_theta):
-                            u[p] -= delta[p]
-                        set_params(st, bnd, wp, stack)
-                        _note_divergence(t, div_t, its)
-                        fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
                 if its[I_BLOCK_POS] >= block:
-                    if fs[F_EM] <= fs[F_ES] or not math.isfinite(fs[F_ES]):
+                    if fs[F_NL] <= LINEARITY_TOL * fs[F_CH]:
+                        _adopt_trial(stm, stt, bnd, wp, stack)
                         fs[F_MU] = max(fs[F_MU] * mu_dec, mu_min)
                         its[I_ACCEPTED] += 1
-                        _checkpoint(st)
-                        fs[F_EM] = 0.0
-                        fs[F_ES] = 0.0
-                        its[I_BLOCK_POS] = 0
-                        its[I_BLOCK_ROWS] = 0
                     else:
+                        fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
                         its[I_REJECTED] += 1
-                        _reject(st, bnd, wp, stack, wnd, fs, its, mu_inc, mu_max)
+                    _new_block(stm, stt, bnd, wp, stack, fs, its)
+                if (t - start) % every == 0:
+                    if _lm_step(A, b, u_ref, u, fs[F_MU], mu_inc, M, L, g, delta, its):
+                        u_save[:] = u_tr
+                        for p in range(n_theta):
+                            u_tr[p] = u[p] + delta[p]
+                        if not _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack):
+                            u_tr[:] = u_save  # a gain such as 1/J2 failed there: keep the previous trial
+                            _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)
+                            _note_divergence(t, div_t, its)
+                    k = its[I_STEPS] % avg_x.shape[0]
+                    avg_x[k, :] = x
+                    avg_cost[k] = 0.5 * max(fs[F_EE], 0.0)
+                    its[I_STEPS] += 1
         if t % record_every == 0:
             i = t // record_every
-            for p in range(n_theta):
-                rec_x[i, p] = x[p]
+            rec_x[i, :] = x
             rec_cost[i] = 0.5 * max(fs[F_EE], 0.0)
             rec_mu[i] = fs[F_MU]
         its[I_NEXT] = t + 1

@@ -15,7 +15,7 @@ import numpy as np
 
 from .model import Network
 
-__all__ = ["rest_eigenvalues", "chatter_radius"]
+__all__ = ["rest_eigenvalues", "chatter_radius", "rest_radii"]
 
 
 def _derivative(transfer: str, n: np.ndarray) -> np.ndarray:
@@ -67,3 +67,14 @@ def chatter_radius(net: Network, values: np.ndarray) -> float:
     eig = rest_eigenvalues(net, values)
     neg = eig[eig.real < -1e-12]
     return float(np.max(np.abs(neg))) if neg.size else 0.0
+
+
+def rest_radii(net: Network, values: np.ndarray) -> tuple[float, float]:
+    """(chatter, growth): the largest modulus among rest eigenvalues with a negative real part, and among
+    the others. Chatter > 1 flips sign every sample; growth > 1 drifts away from rest (e.g. a learned friction
+    curve with a negative slope at zero speed, which feeds energy in)."""
+    eig = rest_eigenvalues(net, values)
+    neg = eig.real < -1e-12
+    chatter = float(np.max(np.abs(eig[neg]))) if neg.any() else 0.0
+    growth = float(np.max(np.abs(eig[~neg]))) if (~neg).any() else 0.0
+    return chatter, growth

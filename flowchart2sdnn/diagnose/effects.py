@@ -1,0 +1,378 @@
+"""The effects library: named, composable candidates for what a chart lacks (PySINDy's feature libraries).
+
+Each effect is a small frozen object that knows
+
+* ``places(diagram)`` - where it may attach (:class:`~.graph.Place`);
+* ``options(diagram, place, scales)`` - the discrete choices to try there (a dead time's n, a saturation
+  limit, a cogging harmonic, or the signal scale that sets a learned curve's neutral shape);
+* ``patch(diagram, place, option)`` - a NEW chart with the effect added and its new quantities at values
+  that are *neutral* when ``neutral`` is True (the patched chart's outputs equal the input chart's, so the
+  score test of :mod:`.score` applies at the current fit); effects whose choice changes the model at once
+  (dead time, a saturation limit inside the data range) are scored from the patched chart as it is;
+* ``describe()`` and ``label(option)`` for reports.
+
+The chart given is never mutated (every patch goes through :func:`dataclasses.replace`).
+
+=============  ==================  =====================================================================
+effect         attaches at         adds
+=============  ==================  =====================================================================
+friction       speed               nonlinear curve of the speed (tanh neurons with bias, v = 0) subtracted
+                                   in its torque sum
+damping        speed, speed diff.  viscous gain with a new parameter (0) in the torque sum(s)
+dead_time      input               a delay of n samples in front of every consumer of the input
+saturation     input               L*sat((u - o)/L) + o: a hard clip at o -/+ L, L scanned in the data range
+backlash       spring angle        the spring torque c*x becomes c*x + odd learned curve (v = 0) of x
+cogging        speed               phi = integral(speed); A sin(p phi) + B cos(p phi) (A = B = 0) in the sum
+=============  ==================  =====================================================================
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass, field, replace
+from typing import Protocol, runtime_checkable
+
+from ..diagram.expr import parse_expr
+from ..diagram.model import Block, Diagram, NonlinearWeights, Parameter, Term
+from ..errors import SdnnError, did_you_mean
+from .graph import (
+    Place,
+    add_blocks,
+    add_terms,
+    fresh_name,
+    input_places,
+    reroute,
+    speed_differences,
+    speeds,
+    spring_angles,
+)
+
+__all__ = [
+    "Scales",
+    "Effect",
+    "Friction",
+    "Damping",
+    "DeadTime",
+    "Saturation",
+    "Backlash",
+    "Cogging",
+    "BUILTIN_EFFECTS",
+    "builtin_effects",
+    "select_effects",
+]
+
+
+@dataclass(frozen=True)
+class Scales:
+    """Magnitudes seen on the training record: they set neutral curve shapes and scanned options.
+
+    Attributes
+    ----------
+    rms : mapping str -> float
+        Root mean square of chart signals (from a simulation of the current fit) and of the inputs.
+    lo, hi : mapping str -> float
+        Smallest and largest value of each input.
+    """
+
+    rms: Mapping[str, float] = field(default_factory=dict)
+    lo: Mapping[str, float] = field(default_factory=dict)
+    hi: Mapping[str, float] = field(default_factory=dict)
+
+    def scale(self, signal: str) -> float:
+        value = float(self.rms.get(signal, 1.0))
+        return value if value > 0 else 1.0
+
+
+@runtime_checkable
+class Effect(Protocol):
+    name: str
+    neutral: bool
+    extra_dof: int
+
+    def places(self, diagram: Diagram) -> tuple[Place, ...]: ...
+
+    def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple: ...
+
+    def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram: ...
+
+    def describe(self) -> str: ...
+
+    def label(self, option) -> str: ...
+
+
+def _sum_terms(place: Place, signal: str) -> dict[str, tuple[Term, ...]]:
+    terms: dict[str, tuple[Term, ...]] = {}
+    for s, sign in place.sums:
+        terms[s] = terms.get(s, ()) + (Term(signal, sign),)
+    return terms
+
+
+def _curve(name: str, at: str, slopes: Sequence[float], scale: float, bias: bool,
+           description: str) -> Block:
+    """A nonlinear block of `at` whose output is zero (v = 0) and whose neurons span the signal's range."""
+    a = tuple(float(s) / scale for s in slopes)
+    return Block(name, "nonlinear", (Term(at),), description=description, neurons=len(a), bias=bias,
+                 weights=NonlinearWeights(a, (0.0,) * len(a), (0.0,) * len(a) if bias else None))
+
+
+# ------------------------------------------------------------------------------------------------ effects
+@dataclass(frozen=True)
+class Friction:
+    """A learned friction curve of a speed: ``sum v_i tanh(a_i w + b_i)`` against the motion.
+
+    The neurons start with v = 0 (neutral) and slopes ``a_i = slopes[i] / rms(w)`` from nearly a sign
+    function to nearly linear, so that the curve can bend into a Stribeck bump; the biases make it
+    asymmetric.
+    """
+
+    slopes: tuple[float, ...] = (100.0, 20.0, 4.0, 0.8)
+    name: str = "friction"
+    neutral: bool = True
+    extra_dof: int = 0
+
+    def places(self, diagram: Diagram) -> tuple[Place, ...]:
+        return speeds(diagram)
+
+    def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
+        return (scales.scale(place.at),)
+
+    def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
+        scale = float(option) if option else 1.0
+        name = fresh_name(diagram, f"fric_{place.at}")
+        block = _curve(name, place.at, self.slopes, scale, True, f"friction of {place.at} (diagnose)")
+        return add_terms(add_blocks(diagram, [block]), _sum_terms(place, name))
+
+    def describe(self) -> str:
+        return f"friction: a learned curve of a speed ({len(self.slopes)} tanh neurons with bias) against the motion"
+
+    def label(self, option) -> str:
+        return ""
+
+
+@dataclass(frozen=True)
+class Damping:
+    """A viscous torque ``b * w`` (or ``b * (w1 - w2)``) with a new parameter b, starting at 0."""
+
+    name: str = "damping"
+    neutral: bool = True
+    extra_dof: int = 0
+
+    def places(self, diagram: Diagram) -> tuple[Place, ...]:
+        return speeds(diagram) + speed_differences(diagram)
+
+    def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
+        return (None,)
+
+    def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
+        pname = fresh_name(diagram, f"b_{place.at}")
+        name = fresh_name(diagram, f"damp_{place.at}", {pname})
+        # dissipative only: a negative damping would only imitate discretisation error or a missing effect
+        p = Parameter(pname, 0.0, min=0.0, description=f"viscous damping of {place.at} (diagnose)")
+        block = Block(name, "gain", (Term(place.at),), k=parse_expr(pname),
+                      description=f"viscous damping of {place.at} (diagnose)")
+        return add_terms(add_blocks(diagram, [block], [p]), _sum_terms(place, name))
+
+    def describe(self) -> str:
+        return "damping: a viscous gain with a new parameter on a speed or a speed difference"
+
+    def label(self, option) -> str:
+        return ""
+
+
+@dataclass(frozen=True)
+class DeadTime:
+    """A pure delay of n samples on an input; n is scanned over ``1..max_samples``."""
+
+    max_samples: int = 20
+    name: str = "dead_time"
+    neutral: bool = False
+    extra_dof: int = 1  # n is estimated too (by the scan)
+
+    def places(self, diagram: Diagram) -> tuple[Place, ...]:
+        return input_places(diagram)
+
+    def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
+        return tuple(range(1, self.max_samples + 1))
+
+    def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
+        n = int(option) if option is not None else 1
+        if n < 1:
+            raise ValueError(f"dead_time needs n >= 1 samples, got {n}")
+        name = fresh_name(diagram, f"dead_{place.at}")
+        block = Block(name, "delay", (Term(place.at),), n=n, description=f"dead time of {place.at} (diagnose)")
+        return reroute(add_blocks(diagram, [block]), place.at, name, keep={name})
+
+    def describe(self) -> str:
+        return f"dead_time: a delay of n = 1..{self.max_samples} samples on an input"
+
+    def label(self, option) -> str:
+        return f"n={int(option)}"
+
+
+@dataclass(frozen=True)
+class Saturation:
+    """A hard clip of an input at learned limits ``o - L .. o + L`` (``L * sat((u - o) / L) + o``).
+
+    At a limit outside the data the clip does nothing and its score is 0, so L is scanned as fractions of
+    the largest |input| seen, with the offset o starting at 0; the refit moves both.
+    """
+
+    fractions: tuple[float, ...] = (0.95, 0.9, 0.85, 0.8, 0.75, 0.7, 0.6, 0.5, 0.4)
+    name: str = "saturation"
+    neutral: bool = False
+    extra_dof: int = 0
+
+    def places(self, diagram: Diagram) -> tuple[Place, ...]:
+        return input_places(diagram)
+
+    def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
+        top = max(abs(float(scales.lo.get(place.at, -1.0))), abs(float(scales.hi.get(place.at, 1.0))))
+        if not top > 0:
+            return ()
+        return tuple(round(f * top, 12) for f in self.fractions)
+
+    def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
+        limit = float(option) if option is not None else 1.0
+        u = place.at
+        taken: set[str] = set()
+
+        def new(base: str) -> str:
+            n = fresh_name(diagram, base, taken)
+            taken.add(n)
+            return n
+
+        lim, off = new(f"{u}_lim"), new(f"{u}_off")
+        c, x, f, g, out = new(f"sat_{u}_o"), new(f"sat_{u}_x"), new(f"sat_{u}_clip"), new(f"sat_{u}_L"), new(f"sat_{u}")
+        unit = next((s.unit for s in diagram.inputs if s.name == u), None)
+        params = [Parameter(lim, limit, unit=unit, min=0.0, description=f"saturation half-range of {u} (diagnose)"),
+                  Parameter(off, 0.0, unit=unit, description=f"saturation centre of {u} (diagnose)")]
+        blocks = [
+            Block(c, "constant", k=parse_expr(off)),
+            Block(x, "sum", (Term(u), Term(c, -1))),
+            Block(f, "function", (Term(x),), k=parse_expr(f"1/{lim}"), f="sat"),
+            Block(g, "gain", (Term(f),), k=parse_expr(lim)),
+            Block(out, "sum", (Term(g), Term(c)), unit=unit, description=f"{u} after saturation (diagnose)"),
+        ]
+        return reroute(add_blocks(diagram, blocks, params), u, out, keep={x})
+
+    def describe(self) -> str:
+        return "saturation: a hard clip of an input at learned limits (scanned from the data's input range)"
+
+    def label(self, option) -> str:
+        return f"L={float(option):.4g}"
+
+
+@dataclass(frozen=True)
+class Backlash:
+    """The spring torque ``c x`` becomes ``c x + sum v_i tanh(a_i x)`` (odd, v = 0): a learnable dead zone."""
+
+    slopes: tuple[float, ...] = (20.0, 5.0, 1.5)
+    name: str = "backlash"
+    neutral: bool = True
+    extra_dof: int = 0
+
+    def places(self, diagram: Diagram) -> tuple[Place, ...]:
+        return spring_angles(diagram)
+
+    def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
+        return (scales.scale(place.at),)
+
+    def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
+        scale = float(option) if option else 1.0
+        spring = diagram.block(place.via)
+        lin = fresh_name(diagram, f"{spring.name}_lin")
+        curve = fresh_name(diagram, f"bl_{place.at}", {lin})
+        block = _curve(curve, place.at, self.slopes, scale, False, f"backlash of {place.at} (diagnose)")
+        blocks = []
+        for b in diagram.blocks:
+            if b.name == spring.name:
+                blocks.append(replace(b, name=lin))
+                blocks.append(Block(spring.name, "sum", (Term(lin), Term(curve)), unit=spring.unit,
+                                    description="spring torque with backlash (diagnose)"))
+            else:
+                blocks.append(b)
+        return add_blocks(replace(diagram, blocks=tuple(blocks)), [block])
+
+    def describe(self) -> str:
+        return "backlash: the spring torque becomes a learned odd curve of the shaft angle"
+
+    def label(self, option) -> str:
+        return ""
+
+
+@dataclass(frozen=True)
+class Cogging:
+    """A position-periodic torque ``A sin(p phi) + B cos(p phi)``, ``phi`` the integral of the speed."""
+
+    harmonics: tuple[int, ...] = (1, 2, 3, 4, 6, 8, 12)
+    name: str = "cogging"
+    neutral: bool = True
+    extra_dof: int = 1  # p is chosen too
+
+    def places(self, diagram: Diagram) -> tuple[Place, ...]:
+        return speeds(diagram)
+
+    def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
+        return tuple(self.harmonics)
+
+    def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
+        p = int(option) if option is not None else 1
+        w = place.at
+        taken: set[str] = set()
+
+        def new(base: str) -> str:
+            n = fresh_name(diagram, base, taken)
+            taken.add(n)
+            return n
+
+        pa, pb = new(f"cog{p}_A_{w}"), new(f"cog{p}_B_{w}")
+        phi, s, c = new(f"phi_{w}"), new(f"cog{p}_sin_{w}"), new(f"cog{p}_cos_{w}")
+        ga, gb, out = new(f"cog{p}_As_{w}"), new(f"cog{p}_Bc_{w}"), new(f"cog{p}_{w}")
+        unit = next((b.unit for b in diagram.blocks if b.name == place.sums[0][0]), None) if place.sums else None
+        params = [Parameter(pa, 0.0, unit=unit, description=f"cogging sine amplitude, harmonic {p} (diagnose)"),
+                  Parameter(pb, 0.0, unit=unit, description=f"cogging cosine amplitude, harmonic {p} (diagnose)")]
+        blocks = [
+            Block(phi, "integrator", (Term(w),), init=0.0, description=f"angle of {w} (diagnose)"),
+            Block(s, "function", (Term(phi),), k=parse_expr(p), f="sin"),
+            Block(c, "function", (Term(phi),), k=parse_expr(p), f="cos"),
+            Block(ga, "gain", (Term(s),), k=parse_expr(pa)),
+            Block(gb, "gain", (Term(c),), k=parse_expr(pb)),
+            Block(out, "sum", (Term(ga), Term(gb)), unit=unit, description=f"cogging torque of {w} (diagnose)"),
+        ]
+        return add_terms(add_blocks(diagram, blocks, params), _sum_terms(place, out))
+
+    def describe(self) -> str:
+        return f"cogging: A sin(p phi) + B cos(p phi) of the angle of a speed, p in {list(self.harmonics)}"
+
+    def label(self, option) -> str:
+        return f"p={int(option)}"
+
+
+# ------------------------------------------------------------------------------------------------ registry
+BUILTIN_EFFECTS: dict[str, Effect] = {
+    e.name: e for e in (Friction(), Damping(), DeadTime(), Saturation(), Backlash(), Cogging())
+}
+
+
+def builtin_effects() -> dict[str, Effect]:
+    """A copy of the registry: name -> effect with its default options."""
+    return dict(BUILTIN_EFFECTS)
+
+
+def select_effects(names: Sequence[str] | None, available: Mapping[str, Effect],
+                   where: str = "--effects") -> tuple[Effect, ...]:
+    """The effects named (all when `names` is None), in the order given; SdnnError for an unknown name."""
+    if names is None:
+        return tuple(available.values())
+    out = []
+    for n in names:
+        n = n.strip()
+        if not n:
+            continue
+        if n not in available:
+            raise SdnnError.at("DIAG001", f"unknown effect {n!r}; known: {', '.join(available)}", where,
+                               hint=did_you_mean(n, available))
+        out.append(available[n])
+    if not out:
+        raise SdnnError.at("DIAG001", "no effect selected", where, hint=f"choose from {', '.join(available)}")
+    return tuple(out)

@@ -1,0 +1,193 @@
+"""Where an effect may attach: structural queries over a chart, and the small rewiring helpers patches use.
+
+The chart IR knows blocks and terms, not physics; these functions read the physics off the structure:
+
+* a **speed** is the output of an integrator whose integrand is a torque sum seen through at least one gain
+  that depends on a parameter (``w1 = integral(MB1 / J1)``). A plain angle (``dphi = integral(w1 - w2)``)
+  has no such gain and is not a speed;
+* a **speed difference** is a sum of exactly two speeds with opposite signs (``dw = w1 - w2``);
+* a **spring angle** is an integrator of a speed difference whose output feeds a parameter gain (the spring
+  ``MC = c * dphi``) that acts in torque sums;
+* the **sign** of a torque sum for a speed is the sign with which a term entering that sum accelerates the
+  speed (the product of the gains' signs at the parameters' initial values), so that friction opposes motion.
+
+Nothing here mutates: every helper returns a new :class:`Diagram`.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+from ..diagram.expr import ExprError
+from ..diagram.model import Block, Diagram, Parameter, Term
+
+__all__ = [
+    "Place",
+    "speeds",
+    "speed_differences",
+    "spring_angles",
+    "input_places",
+    "fresh_name",
+    "add_terms",
+    "reroute",
+    "add_blocks",
+    "consumers",
+]
+
+
+@dataclass(frozen=True)
+class Place:
+    """Where an effect attaches.
+
+    Attributes
+    ----------
+    at : str
+        The signal the effect acts on (the report's `at`): a speed, a speed difference, a spring angle or an
+        input.
+    kind : str
+        "speed", "speed_difference", "spring_angle" or "input".
+    sums : tuple of (str, int)
+        Torque sums a new torque enters and the sign that *opposes* the motion there (-1 for the usual
+        ``MB = M - friction``). Empty for inputs.
+    via : str or None
+        The block an effect rewrites: the spring gain of a spring angle.
+    """
+
+    at: str
+    kind: str
+    sums: tuple[tuple[str, int], ...] = ()
+    via: str | None = None
+
+    def __str__(self) -> str:
+        return self.at
+
+
+def _gain_sign(block: Block, env: dict[str, float]) -> int | None:
+    try:
+        value = block.k.evaluate(env)
+    except (ExprError, ArithmeticError):
+        return None
+    return 1 if value > 0 else -1 if value < 0 else None
+
+
+def _torque_sum(diagram: Diagram, integrator: Block) -> tuple[str, int] | None:
+    """(sum, sign) when `integrator` integrates a sum through at least one parameter gain, else None."""
+    if len(integrator.inputs) != 1:
+        return None
+    env = diagram.parameter_values()
+    names = set(diagram.block_names)
+    term = integrator.inputs[0]
+    sign, has_mass = term.sign, False
+    for _ in range(len(diagram.blocks)):
+        if term.signal not in names:
+            return None
+        b = diagram.block(term.signal)
+        if b.kind == "sum":
+            return (b.name, -sign) if has_mass else None
+        if b.kind != "gain" or len(b.inputs) != 1:
+            return None
+        s = _gain_sign(b, env)
+        if s is None:
+            return None
+        has_mass = has_mass or not b.k.is_constant
+        term = b.inputs[0]
+        sign *= s * term.sign
+    return None
+
+
+def speeds(diagram: Diagram) -> tuple[Place, ...]:
+    """Every speed of the chart with its torque sum (see the module docstring)."""
+    out = []
+    for b in diagram.blocks:
+        if b.kind == "integrator":
+            found = _torque_sum(diagram, b)
+            if found is not None:
+                out.append(Place(b.name, "speed", (found,)))
+    return tuple(out)
+
+
+def speed_differences(diagram: Diagram) -> tuple[Place, ...]:
+    """Sums of two speeds with opposite signs; a damping torque there enters both torque sums."""
+    speed = {p.at: p.sums[0] for p in speeds(diagram)}
+    out = []
+    for b in diagram.blocks:
+        if b.kind != "sum" or len(b.inputs) != 2:
+            continue
+        (t1, t2) = b.inputs
+        if t1.signal in speed and t2.signal in speed and t1.sign == -t2.sign and t1.signal != t2.signal:
+            # D = sum s_i w_i: the torque -b*D*s_i on mass i dissipates power b*D^2
+            sums = tuple((speed[t.signal][0], speed[t.signal][1] * t.sign) for t in (t1, t2))
+            out.append(Place(b.name, "speed_difference", sums))
+    return tuple(out)
+
+
+def consumers(diagram: Diagram, signal: str) -> tuple[Block, ...]:
+    """Blocks with `signal` among their operands."""
+    return tuple(b for b in diagram.blocks if signal in b.signals_in)
+
+
+def spring_angles(diagram: Diagram) -> tuple[Place, ...]:
+    """Integrators of a speed difference that feed a parameter gain (the spring) acting in torque sums."""
+    diffs = {p.at for p in speed_differences(diagram)}
+    sums = {s for p in speeds(diagram) for s, _ in p.sums}
+    out = []
+    for b in diagram.blocks:
+        if b.kind != "integrator" or len(b.inputs) != 1 or b.inputs[0].signal not in diffs:
+            continue
+        for g in consumers(diagram, b.name):
+            if g.kind == "gain" and not g.k.is_constant and any(c.name in sums for c in consumers(diagram, g.name)):
+                out.append(Place(b.name, "spring_angle", via=g.name))
+                break
+    return tuple(out)
+
+
+def input_places(diagram: Diagram) -> tuple[Place, ...]:
+    return tuple(Place(s.name, "input") for s in diagram.inputs)
+
+
+# ---------------------------------------------------------------------------------------------- rewiring
+def fresh_name(diagram: Diagram, base: str, taken: set[str] | frozenset[str] = frozenset()) -> str:
+    """`base`, or `base_2`, `base_3`, ... : a name no signal or parameter of the chart uses yet."""
+    used = set(diagram.block_names) | set(diagram.input_names) | set(diagram.parameter_names) | set(taken)
+    used |= {"pi", "data", "T"}
+    if base not in used:
+        return base
+    i = 2
+    while f"{base}_{i}" in used:
+        i += 1
+    return f"{base}_{i}"
+
+
+def add_blocks(diagram: Diagram, blocks: tuple[Block, ...] | list[Block],
+               parameters: tuple[Parameter, ...] | list[Parameter] = ()) -> Diagram:
+    """The chart with extra blocks and parameters appended (names must be fresh)."""
+    names = set(diagram.block_names) | set(diagram.input_names) | set(diagram.parameter_names)
+    for item in list(blocks) + list(parameters):
+        if item.name in names:
+            raise ValueError(f"patch adds {item.name!r}, which the chart already has")
+        names.add(item.name)
+    return replace(diagram, blocks=diagram.blocks + tuple(blocks), parameters=diagram.parameters + tuple(parameters),
+                   source_sha256=None)
+
+
+def add_terms(diagram: Diagram, terms: dict[str, tuple[Term, ...]]) -> Diagram:
+    """Append operands to sum blocks: ``terms[sum name] = (Term, ...)``."""
+    blocks = []
+    for b in diagram.blocks:
+        extra = terms.get(b.name)
+        if extra:
+            if b.kind != "sum":
+                raise ValueError(f"cannot add an operand to {b.kind} block {b.name!r}; only sums take more")
+            b = replace(b, inputs=b.inputs + tuple(extra))
+        blocks.append(b)
+    return replace(diagram, blocks=tuple(blocks), source_sha256=None)
+
+
+def reroute(diagram: Diagram, signal: str, new: str, keep: set[str] | frozenset[str] = frozenset()) -> Diagram:
+    """Every block except those in `keep` reads `new` where it read `signal`."""
+    blocks = []
+    for b in diagram.blocks:
+        if b.name not in keep and signal in b.signals_in:
+            b = replace(b, inputs=tuple(Term(new, t.sign) if t.signal == signal else t for t in b.inputs))
+        blocks.append(b)
+    return replace(diagram, blocks=tuple(blocks), source_sha256=None)

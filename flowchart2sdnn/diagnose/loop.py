@@ -1,0 +1,421 @@
+"""The diagnose loop: fit, test the residual, score every candidate effect, refit the best, accept or stop.
+
+One round:
+
+1. the current chart is fitted (round 1: the chart as given);
+2. every effect of the library at every place and option is scored by the score test (:mod:`.score`);
+3. the best ``top`` places whose score is significant are refitted briefly (``refit_iter`` LM iterations),
+   each twice - from the current fit with the effect added at neutral values, and from the chart as given
+   with every accepted effect and this one added at neutral values (a refit only from the previous fit gets
+   stuck where the previous fit bent its parameters to imitate the missing effect) - keeping the better;
+4. the refitted candidates are ranked by the information criterion; the first whose validation RMS falls
+   (by at least ``min_gain``) and whose criterion falls is accepted and polished (``max_iter`` iterations);
+5. repeat until nothing is significant, nothing is accepted, or ``rounds`` rounds are done.
+
+AIC = N ln(SSE/N) + 2k and BIC = N ln(SSE/N) + k ln N on the training record, N the number of residuals, k
+the free quantities plus one per scanned discrete choice (a dead time's n, a cogging harmonic).
+Never prints: progress goes through ``progress(text, fraction)``.
+"""
+
+from __future__ import annotations
+
+import math
+import time
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from ..data.csvdata import Dataset
+from ..diagram.model import Diagram
+from ..errors import SdnnError
+from ..identify.problem import Problem, build_problem, metrics
+from ..identify.run import Identification, IdentifySettings, identify
+from .effects import BUILTIN_EFFECTS, Effect, Scales
+from .residual import signal_correlation, whiteness
+from .score import Candidate, Score, Screen, screen
+
+__all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "REPORT_FORMAT", "REPORT_VERSION"]
+
+REPORT_FORMAT = "sdnn-diagnose"
+REPORT_VERSION = 1
+DEFAULT_SPLIT = 0.7
+
+Progress = Callable[[str, "float | None"], None]
+
+
+@dataclass(frozen=True)
+class DiagnoseSettings:
+    """Options of :func:`diagnose` (the CLI's flags)."""
+
+    rounds: int = 3
+    top: int = 5
+    top_options: int = 25
+    runners_up: int = 2
+    refit_iter: int = 40
+    max_iter: int = 100
+    alpha: float = 1e-3
+    criterion: str = "bic"
+    min_gain: float = 0.02
+    alignment: str = "zoh"
+    seed: int = 0
+    split: float | None = None
+
+    def __post_init__(self) -> None:
+        if self.rounds < 0:
+            raise ValueError("--rounds must not be negative")
+        if self.top < 1 or self.top_options < 1:
+            raise ValueError("--top and --top-options must be at least 1")
+        if self.refit_iter < 1 or self.max_iter < 0:
+            raise ValueError("--refit-iter must be >= 1 and --max-iter >= 0")
+        if not 0 < self.alpha < 1:
+            raise ValueError("--alpha must lie strictly between 0 and 1")
+        if self.criterion not in ("aic", "bic"):
+            raise ValueError("--criterion must be aic or bic")
+        if not 0 <= self.min_gain < 1:
+            raise ValueError("--min-gain must lie in [0, 1)")
+        if self.split is not None and not 0 < self.split < 1:
+            raise ValueError("--split must lie strictly between 0 and 1")
+
+
+@dataclass(frozen=True, eq=False)
+class Fitted:
+    """A chart fitted on the training record, with its validation error and information criteria."""
+
+    identification: Identification
+    cost: float
+    n: int
+    k: int
+    validation: dict
+    start: str = "chart"
+    accepted: tuple = ()
+
+    @property
+    def diagram(self) -> Diagram:
+        return self.identification.diagram
+
+    @property
+    def rms(self) -> float:
+        return math.sqrt(2 * self.cost / self.n) if self.n and math.isfinite(self.cost) else math.inf
+
+    @property
+    def validation_rms(self) -> float:
+        return self.validation["rms_all"]
+
+    def criterion(self, which: str) -> float:
+        if not (self.cost > 0 and math.isfinite(self.cost)):
+            return -math.inf if self.cost == 0 else math.inf
+        fit = self.n * math.log(2 * self.cost / self.n)
+        return fit + (2 * self.k if which == "aic" else self.k * math.log(self.n))
+
+    @property
+    def aic(self) -> float:
+        return self.criterion("aic")
+
+    @property
+    def bic(self) -> float:
+        return self.criterion("bic")
+
+
+@dataclass(frozen=True, eq=False)
+class Diagnosis:
+    """What :func:`diagnose` found: REPORT.json as a dict, the final (augmented, identified) chart and fits."""
+
+    report: dict
+    diagram: Diagram
+    final: Fitted
+    nominal: Fitted
+    screens: tuple[Screen, ...] = field(default=())
+
+
+# ------------------------------------------------------------------------------------------------ helpers
+def _rms_all(ms: Sequence[dict], n_out: int) -> float:
+    sse = cnt = 0.0
+    for m in ms:
+        if m["cost"] is None:
+            return math.inf
+        sse += 2 * m["cost"]
+        cnt += m["rows"] * n_out
+    return math.sqrt(sse / cnt) if cnt else math.nan
+
+
+def _validate(ident: Identification, records: Sequence[tuple[Dataset, int]], alignment: str) -> dict:
+    compiled = ident.problem.compiled
+    per = [metrics(compiled, ident.x, ds, alignment, score_from=start) for ds, start in records]
+    return {"rms_all": _rms_all(per, compiled.n_outputs), "records": per}
+
+
+def _fit(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int, extra_dof: int,
+         start: str, progress: Progress | None = None, accepted: tuple = ()) -> Fitted:
+    s = IdentifySettings(max_iter=max_iter, seed=settings.seed, alignment=settings.alignment)
+    ident = identify(diagram, train if len(train) > 1 else train[0], None, s, progress)
+    cost = ident.result["fit"]["train"]["cost"]
+    cost = math.inf if cost is None else float(cost)
+    return Fitted(ident, cost, ident.problem.n_residuals, len(ident.problem.names) + extra_dof,
+                  _validate(ident, records, settings.alignment), start, accepted)
+
+
+def _current_problem(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> Problem:
+    return build_problem(fitted.diagram, train[0], settings.alignment, settings.seed, more=tuple(train[1:]))
+
+
+def _signals(problem: Problem, x: np.ndarray) -> dict[str, np.ndarray]:
+    """Every neuron's output over all training records, concatenated like the residual."""
+    parts = [problem.compiled.signals(x, s.inputs, s.init) for s in problem.segments]
+    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
+
+
+def _inputs(problem: Problem) -> np.ndarray:
+    return np.vstack([s.inputs for s in problem.segments])
+
+
+def _scales(problem: Problem) -> Scales:
+    x = problem.compiled.theta0()
+    sig = _signals(problem, x)
+    rms = {k: float(np.sqrt(np.mean(v**2))) for k, v in sig.items() if np.all(np.isfinite(v))}
+    lo, hi = {}, {}
+    u_all = _inputs(problem)
+    for i, name in enumerate(problem.compiled.input_names):
+        u = u_all[:, i]
+        rms[name] = float(np.sqrt(np.mean(u**2)))
+        lo[name], hi[name] = float(np.min(u)), float(np.max(u))
+    return Scales(rms, lo, hi)
+
+
+def residual_analysis(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> dict:
+    """Whiteness, independence from the inputs and the internal signals most correlated with the residual."""
+    problem = _current_problem(fitted, train, settings)
+    x = problem.compiled.theta0()
+    e = problem.residual(x)
+    if e is None:
+        return {"error": "the fitted chart diverges on the training record"}
+    e = e.reshape(-1, problem.compiled.n_outputs)
+    u = _inputs(problem)
+    out = whiteness(e, u, problem.compiled.output_names, problem.compiled.input_names)
+    sig = _signals(problem, x)
+    inputs = {n: u[:, i] for i, n in enumerate(problem.compiled.input_names)}
+    out["signals"] = signal_correlation(e, {**inputs, **sig}, problem.compiled.output_names)
+    return out
+
+
+def _summary(f: Fitted) -> dict:
+    res = f.identification.result["fit"]["train"]
+    val = f.validation["records"]
+    return {"rms": _num(f.rms), "validation_rms": _num(f.validation_rms), "aic": _num(f.aic), "bic": _num(f.bic),
+            "cost": _num(f.cost), "k": f.k, "rms_per_output": res["rms"], "fit_percent": res["fit_percent"],
+            "validation_rms_per_output": [m["rms"] for m in val],
+            "validation_fit_percent": [m["fit_percent"] for m in val]}
+
+
+def _num(x: float) -> float | None:
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def _candidates(effects: Sequence[Effect], current: Diagram, scales: Scales, done: set) -> list[Candidate]:
+    out = []
+    for effect in effects:
+        for place in effect.places(current):
+            for option in effect.options(current, place, scales):
+                key = (effect.name, place.at) + ((effect.label(option),) if _repeatable(effect) else ())
+                if key not in done:
+                    out.append(Candidate(effect, place, option, current))
+    return out
+
+
+def _refit_set(scr: Screen, settings: DiagnoseSettings) -> list[Score]:
+    """The best option of each of the `top` best places with a significant score, plus the runners-up of the
+    best place's scan (a dead time's n or a cogging harmonic is decided by refitting, not by the score)."""
+    def significant(s: Score) -> bool:
+        return s.scored and s.score > 0 and s.p_value < settings.alpha
+
+    best = [s for s in scr.best_per_place() if significant(s)][: settings.top]
+    if best and settings.runners_up > 0:
+        key = best[0].candidate.key
+        more = [s for s in scr.scores if significant(s) and s.candidate.key == key and s is not best[0]]
+        best[1:1] = more[: settings.runners_up]
+    return best
+
+
+def _repeatable(effect: Effect) -> bool:
+    return bool(getattr(effect, "repeatable", effect.name == "cogging"))
+
+
+def _done_key(c: Candidate) -> tuple:
+    return (c.name, c.at) + ((c.label,) if _repeatable(c.effect) else ())
+
+
+# ------------------------------------------------------------------------------------------------ loop
+def _split(train: list[Dataset], validation: Sequence[Dataset], split: float | None):
+    if validation and split is not None:
+        raise ValueError("give either validation records or a split, not both")
+    if validation:
+        return train, [(v, 0) for v in validation], None
+    if len(train) > 1:
+        raise SdnnError.at("DIAG002", "several training records need validation records (--validate)",
+                           train[1].path, hint="a split applies to a single record")
+    train = train[0]
+    split = DEFAULT_SPLIT if split is None else split
+    n = max(3, int(round(split * train.n_rows)))
+    if train.n_rows - n < 3:
+        raise SdnnError.at("DIAG002", f"only {train.n_rows} rows: too few to split off a validation part",
+                           train.path, hint="give a validation record with --validate")
+    return [train.slice(0, n)], [(train, n)], split
+
+
+def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: Sequence[Dataset] = (),
+             settings: DiagnoseSettings = DiagnoseSettings(), effects: Sequence[Effect] | None = None,
+             progress: Progress | None = None) -> Diagnosis:
+    """Find what `diagram` lacks from measured data, add it, refit, and report before and after.
+
+    Parameters
+    ----------
+    diagram : Diagram
+        The chart as the user wrote it (never modified).
+    train : Dataset or sequence of Dataset
+        The training record(s), each simulated from its own initial state (with ``settings.split``, or
+        without validation records, the leading part of a single record).
+    validation : sequence of Dataset
+        Validation records (each simulated from its own first sample); empty: a split of `train`
+        (``settings.split``, default 0.7), the model free-running over the whole record.
+    settings : DiagnoseSettings
+    effects : sequence of Effect, optional
+        The library to try (default: every built-in effect).
+    progress : callable(text, fraction), optional
+
+    Returns
+    -------
+    Diagnosis
+    """
+    t_start = time.perf_counter()
+    effects = tuple(BUILTIN_EFFECTS.values()) if effects is None else tuple(effects)
+    train = [train] if isinstance(train, Dataset) else list(train)
+    train, records, split = _split(train, list(validation), settings.split)
+
+    def say(text: str, fraction: float | None = None) -> None:
+        if progress:
+            progress(text, fraction)
+
+    say("fitting the chart as given", 0.0)
+    nominal = _fit(diagram, train, records, settings, settings.max_iter, 0, "chart", say)
+    current, nominal_chart, extra_dof = nominal, diagram, 0
+    rounds, candidates_out, accepted, screens = [], [], [], []
+    done: set = set()
+    stop_reason = "rounds"
+    timing = {"nominal_fit": time.perf_counter() - t_start, "screen": [], "refit": []}
+    for r in range(1, settings.rounds + 1):
+        problem = _current_problem(current, train, settings)
+        cands = _candidates(effects, current.diagram, _scales(problem), done)
+        if not cands:
+            stop_reason = "no_candidates"
+            break
+        say(f"round {r}: score test of {len(cands)} candidates", None)
+        scr = screen(cands, problem, train, settings.alignment, settings.seed, settings.top_options, say)
+        screens.append(scr)
+        timing["screen"].append(scr.seconds)
+        best = _refit_set(scr, settings)
+        refits: list[tuple[Score, Fitted]] = []
+        for i, s in enumerate(best):
+            t0 = time.perf_counter()
+            say(f"round {r}: refit {s.candidate.title()} ({i + 1}/{len(best)})", None)
+            fitted = _refit(s.candidate, nominal_chart, train, records, settings, extra_dof, accepted)
+            timing["refit"].append(time.perf_counter() - t0)
+            if fitted is not None:
+                refits.append((s, fitted))
+        achieved = {id(s): f for s, f in refits}
+        for rank, s in enumerate(scr.scores):
+            entry = {"round": r, "rank": rank + 1, **s.as_dict()}
+            f = achieved.get(id(s))
+            if f is not None:
+                entry.update({"refitted": True, "achieved_cost": _num(f.cost),
+                              "achieved_decrease": _num(current.cost - f.cost), "start": f.start,
+                              "validation_rms_after": _num(f.validation_rms),
+                              settings.criterion + "_after": _num(f.criterion(settings.criterion))})
+            candidates_out.append(entry)
+        if not best:
+            stop_reason = "nothing_significant"
+            break
+        refits.sort(key=lambda sf: sf[1].criterion(settings.criterion))
+        choice, reason = None, "no refit succeeded"
+        for s, f in refits:
+            ok_val = f.validation_rms < current.validation_rms * (1 - settings.min_gain)
+            ok_crit = f.criterion(settings.criterion) < current.criterion(settings.criterion)
+            if ok_val and ok_crit:
+                choice = (s, f)
+                break
+            if choice is None and reason == "no refit succeeded":
+                reason = (f"{s.candidate.title()}: " + ("validation RMS did not fall enough" if not ok_val else
+                          f"{settings.criterion.upper()} did not fall"))
+        if choice is None:
+            s, f = refits[0] if refits else (best[0], None)
+            rounds.append(_round_entry(r, s, current, f, False, reason, settings))
+            stop_reason = "nothing_accepted"
+            break
+        s, f = choice
+        c = s.candidate
+        say(f"round {r}: accepted {c.title()}; polishing", None)
+        extra_dof += c.effect.extra_dof
+        polished = _fit(f.diagram, train, records, settings, settings.max_iter, extra_dof, f.start, None,
+                        f.accepted)
+        if not polished.cost <= f.cost:
+            polished = f
+        rounds.append(_round_entry(r, s, current, polished, True, "validation RMS and "
+                                   f"{settings.criterion.upper()} fell", settings))
+        accepted.append({"effect": c.name, "at": c.at, "option": s.as_dict()["option"], "label": c.label})
+        done.add(_done_key(c))
+        nominal_chart = c.effect.patch(nominal_chart, c.place, c.option)
+        current = polished
+    else:
+        stop_reason = "rounds"
+
+    say("residual analysis", None)
+    report = {
+        "format": REPORT_FORMAT,
+        "version": REPORT_VERSION,
+        "stop": stop_reason,
+        "candidates": candidates_out,
+        "rounds": rounds,
+        "accepted": accepted,
+        "before": _summary(nominal),
+        "after": _summary(current),
+        "whiteness": {"before": residual_analysis(nominal, train, settings),
+                      "after": residual_analysis(current, train, settings)},
+        "final": current.identification.result,
+        "settings": {**settings.__dict__, "split": split, "effects": [e.name for e in effects]},
+        "timing": {**timing, "total": time.perf_counter() - t_start},
+    }
+    return Diagnosis(report, current.diagram, current, nominal, tuple(screens))
+
+
+def _refit(c: Candidate, nominal_chart: Diagram, train: list[Dataset], records, settings: DiagnoseSettings,
+           extra_dof: int, accepted: list) -> Fitted | None:
+    """Brief refits from the current fit and from the chart as given (plus accepted effects); the better."""
+    dof = extra_dof + c.effect.extra_dof
+    acc = tuple(a["effect"] + "@" + a["at"] for a in accepted)
+    best = None
+    for start, chart in (("previous", lambda: c.diagram),
+                         ("nominal", lambda: c.effect.patch(nominal_chart, c.place, c.option))):
+        try:
+            f = _fit(chart(), train, records, settings, settings.refit_iter, dof, start, None, acc)
+        except (SdnnError, ValueError, KeyError):
+            continue
+        if best is None or f.cost < best.cost:
+            best = f
+    return best
+
+
+def _round_entry(r: int, s: Score, before: Fitted, after: Fitted | None, accepted: bool, reason: str,
+                 settings: DiagnoseSettings) -> dict:
+    c = s.candidate
+    a = after
+    return {
+        "round": r, "effect": c.name, "at": c.at, "option": s.as_dict()["option"], "label": c.label,
+        "accepted": accepted, "reason": reason, "start": a.start if a else None,
+        "score": _num(s.score), "predicted_decrease": _num(s.score),
+        "achieved_decrease": _num(before.cost - a.cost) if a else None,
+        "rms_before": _num(before.rms), "rms_after": _num(a.rms) if a else None,
+        "validation_rms_before": _num(before.validation_rms),
+        "validation_rms_after": _num(a.validation_rms) if a else None,
+        "aic_before": _num(before.aic), "aic_after": _num(a.aic) if a else None,
+        "bic_before": _num(before.bic), "bic_after": _num(a.bic) if a else None,
+        "before": _summary(before), "after": _summary(a) if a else None,
+    }

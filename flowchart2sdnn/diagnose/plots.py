@@ -1,0 +1,103 @@
+"""`sdnn diagnose --plots DIR`: the residual against the signal each accepted effect was traced to.
+
+For every accepted effect, ``residual_<effect>_<at>.png`` shows, per output, the residual (measured minus
+simulated, training record) of the chart as given (left) and of the final chart (right) against the signal
+the effect attaches to (a speed for friction, an input for a dead time, ...): a friction curve shows up as
+a step at zero speed on the left and is gone on the right. ``whiteness.png`` shows the residual
+autocorrelation before and after with the 99 % band. Written like the identify figures: an Agg canvas per
+figure, rendered to bytes and written atomically.
+"""
+
+from __future__ import annotations
+
+import io
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import atomic_write_bytes
+from ..data.csvdata import Dataset
+from ..identify.problem import build_problem
+from .loop import Diagnosis, Fitted
+
+__all__ = ["write_plots"]
+
+_MAX_POINTS = 20000
+
+
+def _figure(rows: int, cols: int):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(4.5 * cols, max(3.0, 2.6 * rows)), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    return fig, fig.subplots(rows, cols, squeeze=False)
+
+
+def _save(fig, path: Path) -> Path:
+    buffer = io.BytesIO()
+    fig.savefig(buffer, format="png", metadata={"Software": None})
+    atomic_write_bytes(path, buffer.getvalue())
+    return path
+
+
+def _traces(f: Fitted, train: Dataset, alignment: str, seed: int):
+    problem = build_problem(f.diagram, train, alignment, seed)
+    x = problem.compiled.theta0()
+    with np.errstate(all="ignore"):
+        e = problem.residual(x)
+        sig = problem.compiled.signals(x, problem.inputs, problem.init)
+    sig = dict(sig)
+    for i, name in enumerate(problem.compiled.input_names):
+        sig[name] = problem.inputs[:, i]
+    e = None if e is None else e.reshape(problem.targets.shape)
+    return e, sig, problem.compiled.output_names
+
+
+def write_plots(diagnosis: Diagnosis, train: Dataset, directory: str | Path) -> list[Path]:
+    """Write the figures; returns the paths written. Needs matplotlib (checked by the CLI first)."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    settings = diagnosis.report["settings"]
+    alignment, seed = settings["alignment"], settings["seed"]
+    if settings.get("split") is not None:
+        train = train.slice(0, max(3, int(round(settings["split"] * train.n_rows))))
+    e0, _, names = _traces(diagnosis.nominal, train, alignment, seed)
+    e1, s1, _ = _traces(diagnosis.final, train, alignment, seed)
+    first = 1 if alignment == "zoh" else 0
+    measured = {n: np.asarray(train.columns[n])[first:] for n in names}  # outputs on the fitted rows
+    written = []
+    rng = np.random.default_rng(0)
+    for a in diagnosis.report["accepted"]:
+        at = a["at"]
+        # one abscissa for both panels: the measured signal, else the final chart's (the better estimate)
+        x = measured.get(at, s1.get(at))
+        if e0 is None or e1 is None or x is None:
+            continue
+        n = e0.shape[0]
+        pick = np.sort(rng.choice(n, size=min(n, _MAX_POINTS), replace=False))
+        fig, axes = _figure(len(names), 2)
+        for i, out in enumerate(names):
+            for j, (e, title) in enumerate(((e0, "chart as given"), (e1, "final chart"))):
+                ax = axes[i, j]
+                ax.plot(x[pick], e[pick, i], ".", ms=1.5, color="tab:blue" if j == 0 else "tab:green")
+                ax.axhline(0.0, color="0.3", lw=0.6)
+                ax.set_xlabel(at)
+                ax.set_ylabel(f"residual {out}")
+                ax.set_title(f"{title}: {a['effect']} at {at}", fontsize=9)
+        written.append(_save(fig, directory / f"residual_{a['effect']}_{at}.png"))
+    w = diagnosis.report.get("whiteness", {})
+    if "autocorrelation" in (w.get("before") or {}) and "autocorrelation" in (w.get("after") or {}):
+        fig, axes = _figure(len(names), 1)
+        for i, out in enumerate(names):
+            ax = axes[i, 0]
+            for key, color in (("before", "tab:blue"), ("after", "tab:green")):
+                s = w[key]["autocorrelation"][out]
+                ax.plot(s["lags"], s["r"], "o-", ms=3, color=color, label=key)
+            band = w["after"]["bound"]
+            ax.axhspan(-band, band, color="0.85")
+            ax.set_xlabel("lag (samples)")
+            ax.set_ylabel(f"autocorrelation {out}")
+            ax.legend(fontsize=8)
+        written.append(_save(fig, directory / "whiteness.png"))
+    return written

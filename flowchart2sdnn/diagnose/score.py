@@ -1,0 +1,427 @@
+"""The score test: how much would one Gauss-Newton step on the patched chart lower the cost?
+
+At the current fit theta (cost E = 1/2 e^T e, model Jacobian J by RTRL), one undamped Gauss-Newton step
+lowers the linearised cost by
+
+    dGN(J, e) = 1/2 g^T (J^T J)^+ g = 1/2 || P_J e ||^2,        g = J^T e,
+
+P_J the orthogonal projector onto the columns of J. A candidate is scored by the cost one GN step from the
+patched chart would reach, against the cost one GN step from the current chart would reach:
+
+    score = [E_base - dGN(J_base, e_base)] - [E_patch - dGN(J_patch, e_patch)].
+
+Why the full step (old and new quantities together) rather than the new quantities alone: the new columns
+are usually far from orthogonal to the old ones (a viscous term on one mass looks much like one on the
+other when the shaft is stiff); restricted to the new quantities the predicted decrease counts again what
+the old parameters already explain, and it ranks such look-alikes high. With both, the score is exactly the
+decrease the new columns add *beyond* the old ones (for a neutral patch e_patch = e_base and
+J_patch = [J_base, J_new], so score = 1/2 ||P_{J_new,perp} e||^2: Rao's efficient score statistic times
+sigma^2 / 2), and it is zero for a candidate the chart can already imitate. Subtracting the base step makes
+the score independent of how far the current fit is from converged. The same formula scores a patch that is
+not neutral (a dead time, a clip inside the data range): there the patched chart starts from another cost.
+
+(J^T J)^+ is applied through the eigen-decomposition of the Gram matrix of the column-normalised J, with
+eigenvalues below ``RCOND`` times the largest dropped (the "tiny" regularisation: directions the data do not
+determine are not stepped along). Columns that are exactly zero at the neutral point (the slopes of a learned
+curve whose output weights are 0) drop out, which is right: to first order they cannot act yet.
+
+Cost: every neutral candidate is patched into ONE chart (at the neutral point none of them changes the
+outputs or the others' sensitivities), so one RTRL pass gives all their columns; each candidate is then a
+small eigenproblem on its rows and columns of one Gram matrix. A candidate that is not neutral needs its own
+pass: first the cost of each of its options by simulation, then the full score for the ``top_options`` best.
+
+Under the hypothesis that the chart lacks nothing and the residual is white with variance sigma^2,
+``2 * score / sigma^2`` is approximately chi-square with ``dof`` degrees of freedom (the rank the candidate
+adds, plus one for a scanned discrete choice); its p-value guides significance, but a residual that is not
+white (discretisation error, a missing effect elsewhere) inflates it, so acceptance is decided by refits.
+"""
+
+from __future__ import annotations
+
+import functools
+import math
+from collections.abc import Callable, Sequence
+from dataclasses import dataclass, field
+
+import numpy as np
+from scipy.linalg import eigh
+from scipy.stats import chi2
+
+from ..data.csvdata import Dataset
+from ..diagram.model import Diagram
+from ..errors import SdnnError
+from ..identify.problem import Problem, build_problem
+from .effects import Effect
+from .graph import Place
+
+__all__ = ["RCOND", "Candidate", "Baseline", "Score", "Screen", "gauss_newton_decrease", "new_quantities",
+           "screen"]
+
+RCOND = 1e-12
+
+
+@dataclass(frozen=True, eq=False)
+class Candidate:
+    """One effect at one place with one option, patched into `base` (its new quantities neutral)."""
+
+    effect: Effect
+    place: Place
+    option: object
+    base: Diagram
+
+    @property
+    def name(self) -> str:
+        return self.effect.name
+
+    @property
+    def at(self) -> str:
+        return self.place.at
+
+    @property
+    def key(self) -> tuple[str, str]:
+        return (self.effect.name, self.place.at)
+
+    @property
+    def label(self) -> str:
+        return self.effect.label(self.option)
+
+    @property
+    def neutral(self) -> bool:
+        return bool(self.effect.neutral)
+
+    @functools.cached_property
+    def diagram(self) -> Diagram:
+        return self.effect.patch(self.base, self.place, self.option)
+
+    def title(self) -> str:
+        return f"{self.name} at {self.at}" + (f" ({self.label})" if self.label else "")
+
+
+@dataclass(frozen=True)
+class Baseline:
+    """The current chart at the current fit on the training record."""
+
+    cost: float
+    gn_decrease: float
+    rank: int
+    n_residuals: int
+    n_theta: int
+    sigma2: float
+
+    @property
+    def gn_cost(self) -> float:
+        return self.cost - self.gn_decrease
+
+
+@dataclass(frozen=True, eq=False)
+class Score:
+    """The score of one candidate; ``score`` and costs in cost units (E = 1/2 sum e^2).
+
+    ``predicted_cost`` is None for an option that was only simulated (not among the best of its scan).
+    """
+
+    candidate: Candidate
+    score: float
+    cost: float
+    predicted_cost: float | None
+    dof: int = 0
+    statistic: float = math.nan
+    p_value: float = math.nan
+    error: str | None = None
+
+    @property
+    def scored(self) -> bool:
+        return self.error is None and self.predicted_cost is not None and math.isfinite(self.score)
+
+    def as_dict(self) -> dict:
+        c = self.candidate
+        return {"effect": c.name, "at": c.at, "option": _jsonable(c.option), "label": c.label,
+                "score": _finite(self.score) if self.scored else None,
+                "predicted_cost": _finite(self.predicted_cost), "cost_patched": _finite(self.cost),
+                "dof": self.dof, "statistic": _finite(self.statistic), "p_value": _finite(self.p_value),
+                "error": self.error}
+
+
+@dataclass(frozen=True, eq=False)
+class Screen:
+    """All scores of one round, ranked (scored candidates first, best first)."""
+
+    baseline: Baseline
+    scores: tuple[Score, ...]
+    seconds: float = 0.0
+    passes: dict = field(default_factory=dict)
+
+    def best_per_place(self) -> list[Score]:
+        """The best scored option of every (effect, place), ranked."""
+        seen, out = set(), []
+        for s in self.scores:
+            if s.scored and s.candidate.key not in seen:
+                seen.add(s.candidate.key)
+                out.append(s)
+        return out
+
+
+def _finite(x) -> float | None:
+    return float(x) if x is not None and math.isfinite(x) else None
+
+
+def _jsonable(option):
+    if option is None or isinstance(option, (bool, int, str)):
+        return option
+    if isinstance(option, float):
+        return _finite(option)
+    return str(option)
+
+
+# ------------------------------------------------------------------------------------------------ numerics
+def _gram(J: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gram matrix and gradient of the column-normalised Jacobian (zero columns stay zero)."""
+    norms = np.linalg.norm(J, axis=0)
+    norms[norms == 0] = 1.0
+    Js = J / norms
+    return Js.T @ Js, Js.T @ e
+
+
+def _decrease(G: np.ndarray, g: np.ndarray, rcond: float = RCOND, sign: np.ndarray | None = None):
+    """1/2 g^T G^+ g and the rank; `sign[i]` = +1 (-1) keeps quantity i from stepping down (up): on a bound.
+
+    Bounds by an active set: a quantity whose unconstrained step leaves its bound is held there (its column
+    dropped) and the step recomputed, the worst offender first.
+    """
+    active = np.ones(G.shape[0], dtype=bool)
+    while True:
+        idx = np.flatnonzero(active)
+        if idx.size == 0:
+            return 0.0, 0
+        Gs, gs = G[np.ix_(idx, idx)], g[idx]
+        w, V = eigh(Gs, check_finite=False)
+        if not w.size or w[-1] <= 0:
+            return 0.0, 0
+        keep = w > rcond * w[-1]
+        c = V[:, keep].T @ gs
+        if sign is not None and np.any(sign[idx] != 0):
+            step = V[:, keep] @ (c / w[keep])
+            wrong = step * sign[idx]
+            if np.any(wrong < 0):
+                active[idx[int(np.argmin(wrong))]] = False
+                continue
+        return 0.5 * float(np.sum(c * c / w[keep])), int(np.sum(keep))
+
+
+def gauss_newton_decrease(J: np.ndarray, e: np.ndarray, rcond: float = RCOND) -> tuple[float, int]:
+    """Decrease of 1/2 ||e - J d||^2 achieved by the least-squares step d, and the numerical rank used.
+
+    Parameters
+    ----------
+    J : (M, P) ndarray
+    e : (M,) ndarray
+    rcond : float
+        Eigenvalues of the Gram matrix of the column-normalised J below ``rcond`` times the largest count as
+        zero (singular values below ``sqrt(rcond)``).
+
+    Returns
+    -------
+    (decrease, rank) : ``1/2 g^T (J^T J)^+ g`` with ``g = J^T e``, and the rank used.
+    """
+    if J.ndim != 2 or J.shape[0] != e.shape[0]:
+        raise ValueError(f"J has shape {J.shape}, e has shape {e.shape}")
+    return _decrease(*_gram(J, e), rcond)
+
+
+def new_quantities(before: Diagram, after: Diagram) -> tuple[str, ...]:
+    """theta names that `after` adds to `before`: new free parameters and the weights of new curves."""
+    old_p = set(before.parameter_names)
+    names = [p.name for p in after.parameters if p.name not in old_p and not p.fixed]
+    old_b = set(before.block_names)
+    for b in after.blocks:
+        if b.kind == "nonlinear" and b.name not in old_b and not b.fixed:
+            for i in range(1, (b.neurons or 0) + 1):
+                names += [f"{b.name}.a{i}", f"{b.name}.v{i}"] + ([f"{b.name}.b{i}"] if b.bias else [])
+    return tuple(names)
+
+
+# ------------------------------------------------------------------------------------------------ screen
+def _significance(score: float, dof: int, base: Baseline) -> tuple[float, float]:
+    stat = 2.0 * score / base.sigma2 if base.sigma2 > 0 else math.inf
+    if dof <= 0 or not math.isfinite(stat):
+        return stat, (1.0 if not stat > 0 else 0.0)
+    return stat, float(chi2.sf(max(stat, 0.0), dof))
+
+
+def _fun(problem: Problem):
+    return problem.fun(problem.compiled.theta0())
+
+
+def baseline_of(problem: Problem) -> tuple[Baseline, np.ndarray, np.ndarray]:
+    out = _fun(problem)
+    if out is None:
+        raise SdnnError.at("DIAG010", "the current chart diverges on the training record; nothing to diagnose",
+                           problem.diagram.file)
+    e, J = out
+    cost = 0.5 * float(e @ e)
+    dec, rank = _decrease(*_gram(J, e), sign=_bound_sign(problem))
+    sigma2 = 2 * cost / max(1, e.size - rank)
+    return Baseline(cost, dec, rank, e.size, J.shape[1], sigma2), e, J
+
+
+def _bound_sign(problem: Problem) -> np.ndarray:
+    """+1 for theta entries on their lower bound, -1 on their upper bound, else 0."""
+    x = problem.compiled.theta0()
+    spec = {p.name: p for p in problem.network.parameters}
+    sign = np.zeros(x.size)
+    for i, n in enumerate(problem.names):
+        p = spec.get(n)
+        if p is not None and p.min is not None and x[i] <= p.min:
+            sign[i] = 1.0
+        elif p is not None and p.max is not None and x[i] >= p.max:
+            sign[i] = -1.0
+    return sign
+
+
+def _score_from(c: Candidate, e: np.ndarray, J: np.ndarray, base: Baseline, problem: Problem) -> Score:
+    cost = 0.5 * float(e @ e)
+    dec, rank = _decrease(*_gram(J, e), sign=_bound_sign(problem))
+    predicted = cost - dec
+    score = base.gn_cost - predicted
+    dof = max(rank - base.rank, 0) + c.effect.extra_dof
+    stat, p = _significance(score, dof, base)
+    return Score(c, score, cost, predicted, dof, stat, p)
+
+
+def _error(c: Candidate, text: str) -> Score:
+    return Score(c, math.nan, math.nan, None, error=text)
+
+
+def _build(diagram: Diagram, train: Sequence[Dataset], alignment: str, seed: int) -> Problem:
+    return build_problem(diagram, train[0], alignment, seed, more=tuple(train[1:]))
+
+
+def _screen_neutral(cands: Sequence[Candidate], current: Diagram, base_names: tuple[str, ...], e0: np.ndarray,
+                    base: Baseline, train: Sequence[Dataset], alignment: str, seed: int) -> list[Score] | None:
+    """All neutral candidates from one chart that holds them all; None when that chart cannot be built."""
+    composed, groups = current, []
+    for c in cands:
+        before = composed
+        try:
+            composed = c.effect.patch(composed, c.place, c.option)
+        except (SdnnError, ValueError, KeyError):
+            return None
+        groups.append((c, new_quantities(before, composed)))
+    try:
+        problem = _build(composed, train, alignment, seed)
+    except SdnnError:
+        return None
+    out = _fun(problem)
+    if out is None:
+        return None
+    e, J = out
+    if e.shape != e0.shape or not np.allclose(e, e0, rtol=1e-9, atol=1e-12 * (1 + np.max(np.abs(e0)))):
+        return None  # some patch was not neutral after all: score them one by one
+    index = {n: i for i, n in enumerate(problem.names)}
+    bound_sign = _bound_sign(problem)
+    norms = np.linalg.norm(J, axis=0)
+    norms[norms == 0] = 1.0
+    old = [index[n] for n in base_names]
+    Jo = J[:, old] / norms[old]
+    Goo, go = Jo.T @ Jo, Jo.T @ e
+    scores = []
+    for c, new in groups:
+        # only the blocks of the Gram matrix this candidate needs: old x old (shared), old x new, new x new
+        cols = [index[n] for n in new if n in index]
+        Jn = J[:, cols] / norms[cols]
+        Gon = Jo.T @ Jn
+        G = np.block([[Goo, Gon], [Gon.T, Jn.T @ Jn]])
+        sign = np.concatenate([bound_sign[old], bound_sign[cols]])
+        dec, rank = _decrease(G, np.concatenate([go, Jn.T @ e]), sign=sign)
+        predicted = base.cost - dec
+        score = base.gn_cost - predicted
+        dof = max(rank - base.rank, 0) + c.effect.extra_dof
+        stat, p = _significance(score, dof, base)
+        scores.append(Score(c, score, base.cost, predicted, dof, stat, p))
+    return scores
+
+
+def _score_one(c: Candidate, base: Baseline, train: Sequence[Dataset], alignment: str, seed: int,
+               problem: Problem | None = None) -> Score:
+    if problem is None:
+        try:
+            problem = _build(c.diagram, train, alignment, seed)
+        except (SdnnError, ValueError, KeyError) as exc:
+            return _error(c, _message(exc))
+    out = _fun(problem)
+    if out is None:
+        return _error(c, "the patched chart diverges on the training record")
+    return _score_from(c, out[0], out[1], base, problem)
+
+
+def _message(exc: Exception) -> str:
+    if isinstance(exc, SdnnError):
+        return exc.diagnostics[0].one_line()
+    return f"{type(exc).__name__}: {exc}"
+
+
+def screen(candidates: Sequence[Candidate], problem: Problem, train: Sequence[Dataset], alignment: str = "zoh",
+           seed: int = 0, top_options: int = 3,
+           progress: Callable[[str, float | None], None] | None = None) -> Screen:
+    """Score every candidate against the current chart (`problem`, at its current values).
+
+    Parameters
+    ----------
+    candidates : sequence of Candidate
+        All patching ``problem.diagram``.
+    problem : Problem
+        The current chart on the training record; its theta0 is the current fit.
+    train : sequence of Dataset
+        The training record(s) `problem` was built from.
+    top_options : int
+        For an effect that is not neutral, the options (per place) with the lowest simulated cost that get
+        the full score; the others keep only their simulated cost.
+
+    Returns
+    -------
+    Screen
+        Scores ranked best first; failures and cost-only options last.
+    """
+    import time
+
+    t0 = time.perf_counter()
+    train = [train] if isinstance(train, Dataset) else list(train)
+    base, e0, _ = baseline_of(problem)
+    passes = {"jacobian": 1, "simulation": 0}
+    neutral = [c for c in candidates if c.neutral]
+    others = [c for c in candidates if not c.neutral]
+    scores: list[Score] = []
+    if neutral:
+        if progress:
+            progress(f"score test: {len(neutral)} neutral candidates in one pass", 0.0)
+        joint = _screen_neutral(neutral, problem.diagram, problem.names, e0, base, train, alignment, seed)
+        passes["jacobian"] += 1
+        if joint is None:
+            joint = [_score_one(c, base, train, alignment, seed) for c in neutral]
+            passes["jacobian"] += len(neutral)
+        scores += joint
+    # not neutral: the cost of every option by simulation, the full score for the best few per place
+    groups: dict[tuple[str, str], list[tuple[Candidate, float | None, str | None, Problem | None]]] = {}
+    for i, c in enumerate(others):
+        if progress:
+            progress(f"scan {c.title()}", (i + 1) / max(1, len(others)))
+        p = None
+        try:
+            p = _build(c.diagram, train, alignment, seed)
+            e = p.residual(p.compiled.theta0())
+            passes["simulation"] += 1
+            cost, err = (0.5 * float(e @ e), None) if e is not None else (None, "diverges")
+        except (SdnnError, ValueError, KeyError) as exc:
+            cost, err = None, _message(exc)
+        groups.setdefault(c.key, []).append((c, cost, err, p))
+    for items in groups.values():
+        ok = sorted((x for x in items if x[1] is not None), key=lambda x: x[1])
+        for rank, (c, cost, _, p) in enumerate(ok):
+            if rank < top_options:
+                scores.append(_score_one(c, base, train, alignment, seed, p))
+                passes["jacobian"] += 1
+            else:
+                scores.append(Score(c, math.nan, cost, None))
+        scores += [_error(c, err or "failed") for c, cost, err, _ in items if cost is None]
+    ranked = sorted(scores, key=lambda s: (not s.scored, -(s.score if s.scored else 0.0)))
+    return Screen(base, tuple(ranked), time.perf_counter() - t0, passes)

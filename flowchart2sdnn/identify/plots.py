@@ -1,0 +1,267 @@
+"""`sdnn identify --plots DIR`: the figures of the paper for one identification, as PNG files.
+
+What is drawn (file names in DIR):
+
+- ``output.png`` (Fig. 8): measured and model output per output over the training record (free run with
+  the identified values) and, below, the cost: per LM iteration offline, the window cost over time online.
+- ``residual.png``: measured minus model output over time, per output.
+- ``parameters.png`` (Fig. 9, online mode only): the physical parameters over time.
+- ``curve_<block>.png`` (Figs. 7 and 10): each learned curve y = sum_i v_i tanh(a_i x + b_i) over the range
+  of the signal that feeds the block during the record (the range is shaded).
+
+matplotlib is an optional extra (``pip install flowchart2sdnn[plots]``). No pyplot and no global backend:
+each figure is rendered by its own Agg canvas to bytes and written with
+:func:`~flowchart2sdnn.atomic.atomic_write_bytes`, so a reader never sees half a PNG.
+"""
+
+from __future__ import annotations
+
+import io
+import re
+from pathlib import Path
+
+import numpy as np
+
+from ..atomic import atomic_write_bytes
+from ..errors import SdnnError
+
+__all__ = ["require_matplotlib", "write_plots", "curve_input_range"]
+
+_INSTALL = "pip install flowchart2sdnn[plots]"
+# resolving a signal through gains and sums: charts nest only a few levels; the limit guards cycles
+_MAX_DEPTH = 32
+
+
+def require_matplotlib() -> None:
+    """Raise a one-line SdnnError (PLOT001) naming the install command when matplotlib is missing."""
+    try:
+        import matplotlib  # noqa: F401
+        from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: F401
+    except ImportError:
+        raise SdnnError.at("PLOT001", f"--plots needs matplotlib, which is not installed: {_INSTALL}", "--plots",
+                           hint=_INSTALL) from None
+
+
+def _figure(rows: int, width: float = 9.0, height: float = 2.4):
+    from matplotlib.backends.backend_agg import FigureCanvasAgg
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(width, max(3.0, height * rows)), dpi=100, layout="constrained")
+    FigureCanvasAgg(fig)
+    axes = fig.subplots(rows, 1, squeeze=False)[:, 0]
+    return fig, axes
+
+
+def _save(fig, path: Path) -> Path:
+    buffer = io.BytesIO()
+    # no Software/date metadata: the same run gives the same bytes
+    fig.savefig(buffer, format="png", metadata={"Software": None})
+    atomic_write_bytes(path, buffer.getvalue())
+    return path
+
+
+def _times(outcome) -> np.ndarray:
+    problem = outcome.problem
+    first = 1 if problem.alignment == "zoh" else 0  # zoh: the fitted rows start at row 1
+    return (np.arange(len(problem.targets)) + first) * float(problem.network.sample_time)
+
+
+def _signal_values(name: str, sign: int, outcome, signals: dict, params: dict, depth: int = 0):
+    """The values of chart signal `name` (times `sign`) over the record, or None when it cannot be resolved.
+
+    Neuron signals come straight from the network; gains and sums are folded into weights by the compiler,
+    so they are rebuilt from their inputs.
+    """
+    problem = outcome.problem
+    if depth > _MAX_DEPTH:
+        return None
+    if name in signals:
+        return sign * signals[name]
+    inputs = [i.name for i in problem.network.inputs]
+    if name in inputs:
+        return sign * problem.inputs[:, inputs.index(name)]
+    block = next((b for b in outcome.diagram.blocks if b.name == name), None)
+    if block is None:
+        return None
+    if block.kind == "nonlinear":
+        weights = outcome.result["nonlinear"].get(name)
+        parts = [signals.get(f"{name}[{i}]") for i in range(block.neurons or 0)]
+        if weights is None or any(p is None for p in parts):
+            return None
+        return sign * sum(v * p for v, p in zip(weights["v"], parts, strict=True))
+    if block.kind == "gain" and block.k is not None:
+        x = _signal_values(block.inputs[0].signal, block.inputs[0].sign, outcome, signals, params, depth + 1)
+        try:
+            k = float(block.k.evaluate(params))
+        except (ValueError, ArithmeticError):
+            return None
+        return None if x is None else sign * k * x
+    if block.kind == "sum":
+        total = 0.0
+        for term in block.inputs:
+            x = _signal_values(term.signal, term.sign, outcome, signals, params, depth + 1)
+            if x is None:
+                return None
+            total = total + x
+        return sign * total if not np.isscalar(total) else None
+    return None
+
+
+def curve_input_range(outcome, block: str) -> tuple[float, float] | None:
+    """(min, max) of the signal feeding nonlinear `block` in a free run over the training record, or None."""
+    problem = outcome.problem
+    b = next(b for b in outcome.diagram.blocks if b.name == block)
+    with np.errstate(all="ignore"):
+        signals = problem.compiled.signals(outcome.x, problem.inputs, problem.init)
+    params, _ = problem.compiled.values(outcome.x)
+    term = b.inputs[0]
+    x = _signal_values(term.signal, term.sign, outcome, signals, params)
+    if x is None:
+        return None
+    x = np.asarray(x, dtype=float)
+    x = x[np.isfinite(x)]
+    return (float(x.min()), float(x.max())) if x.size else None
+
+
+def _curve(weights: dict, x: np.ndarray) -> np.ndarray:
+    a = np.asarray(weights["a"], dtype=float)
+    v = np.asarray(weights["v"], dtype=float)
+    b = np.asarray(weights.get("b") or np.zeros_like(a), dtype=float)
+    return np.tanh(np.outer(x, a) + b) @ v
+
+
+def _plot_output(outcome, t, y, yhat, names, directory: Path) -> Path:
+    result = outcome.result
+    fig, axes = _figure(len(names) + 1)
+    for i, name in enumerate(names):
+        ax = axes[i]
+        ax.plot(t, y[:, i], color="0.45", lw=0.8, label=f"{name} measured")
+        ax.plot(t, yhat[:, i], color="tab:red", lw=0.8, ls="--", label=f"{name} model")
+        ax.set_ylabel(name)
+        ax.legend(loc="upper right", fontsize="small")
+        ax.grid(alpha=0.3)
+    axes[len(names) - 1].set_xlabel("time in s")
+    ax = axes[-1]
+    online = result.get("online")
+    if online and online.get("cost"):
+        ax.plot(online["cost_time"], online["cost"], color="tab:blue", lw=0.9)
+        ax.set_xlabel("time in s")
+        ax.set_ylabel("window cost E")
+    else:
+        history = (result.get("optimizer") or {}).get("cost_history") or [result["fit"]["train"]["cost"] or 0.0]
+        ax.plot(np.arange(len(history)), history, color="tab:blue", marker=".", lw=0.9)
+        ax.set_xlabel("LM iteration")
+        ax.set_ylabel("cost E")
+    if all(c is not None and c > 0 for c in ax.get_lines()[0].get_ydata()):
+        ax.set_yscale("log")
+    ax.grid(alpha=0.3)
+    fig.suptitle(f"{outcome.diagram.name}: measured and model output, cost ({result['status']})")
+    return _save(fig, directory / "output.png")
+
+
+def _plot_residual(t, y, yhat, names, directory: Path) -> Path:
+    fig, axes = _figure(len(names))
+    for i, name in enumerate(names):
+        e = y[:, i] - yhat[:, i]
+        axes[i].plot(t, e, color="tab:purple", lw=0.6)
+        axes[i].axhline(0.0, color="0.3", lw=0.6)
+        rms = float(np.sqrt(np.mean(e**2))) if np.all(np.isfinite(e)) and e.size else float("nan")
+        axes[i].set_ylabel(f"{name} residual")
+        axes[i].set_title(f"{name}: measured - model, RMS {rms:.4g}", fontsize="medium")
+        axes[i].grid(alpha=0.3)
+    axes[-1].set_xlabel("time in s")
+    return _save(fig, directory / "residual.png")
+
+
+def _plot_parameters(outcome, directory: Path) -> Path | None:
+    online = outcome.result.get("online")
+    physical = [p.name for p in outcome.problem.network.parameters]
+    traj = (online or {}).get("trajectories", {})
+    names = [n for n in physical if n in traj]
+    if not names or not online.get("trajectory_time"):
+        return None
+    fig, axes = _figure(len(names), height=2.0)
+    params = outcome.result["parameters"]
+    for ax, name in zip(axes, names, strict=True):
+        ax.plot(online["trajectory_time"], traj[name], color="tab:green", lw=0.9)
+        ax.axhline(params[name]["value"], color="0.3", lw=0.6, ls=":", label=f"mean {params[name]['value']:.5g}")
+        unit = params[name].get("unit")
+        ax.set_ylabel(f"{name}" + (f" in {unit}" if unit else ""))
+        ax.legend(loc="upper right", fontsize="small")
+        ax.grid(alpha=0.3)
+    axes[-1].set_xlabel("time in s")
+    fig.suptitle("parameters during quasi-online identification")
+    return _save(fig, directory / "parameters.png")
+
+
+def _plot_curve(outcome, block: str, weights: dict, directory: Path) -> Path:
+    span = curve_input_range(outcome, block)
+    if span is None or not span[1] > span[0]:
+        # unknown or constant input: show where the neurons bend (|a x + b| <= 3)
+        a = np.abs(np.asarray(weights["a"], dtype=float))
+        half = 3.0 / max(float(np.min(a[a > 0])) if np.any(a > 0) else 1.0, 1e-12)
+        centre = 0.0 if span is None else span[0]
+        lo, hi = centre - half, centre + half
+    else:
+        lo, hi = span
+    pad = 0.1 * (hi - lo)
+    x = np.linspace(lo - pad, hi + pad, 801)
+    fig, axes = _figure(1, width=7.0, height=4.0)
+    ax = axes[0]
+    ax.plot(x, _curve(weights, x), color="tab:red", lw=1.2)
+    if span is not None and span[1] > span[0]:
+        ax.axvspan(span[0], span[1], color="tab:blue", alpha=0.08, label="range seen in the record")
+        ax.legend(loc="best", fontsize="small")
+    b = next(b for b in outcome.diagram.blocks if b.name == block)
+    source = str(b.inputs[0])
+    unit = f" in {b.unit}" if b.unit else ""
+    ax.set_xlabel(source)
+    ax.set_ylabel(f"{block}{unit}")
+    ax.grid(alpha=0.3)
+    state = "fixed" if weights.get("fixed") else "identified"
+    ax.set_title(f"{block} = f({source}), {len(weights['a'])} tanh neurons ({state})", fontsize="medium")
+    safe = re.sub(r"[^A-Za-z0-9_.-]", "_", block)
+    return _save(fig, directory / f"curve_{safe}.png")
+
+
+def write_plots(outcome, directory: str | Path) -> list[Path]:
+    """Draw the figures of an identification into `directory` (created if needed); return the files written.
+
+    Parameters
+    ----------
+    outcome : Identification
+        What :func:`flowchart2sdnn.identify.run.identify` returned.
+    directory : str or Path
+        Existing PNGs of the same names are replaced (atomically).
+
+    Returns
+    -------
+    list of Path
+        ``output.png``, ``residual.png``, ``parameters.png`` (online mode), one ``curve_<block>.png`` per
+        learned curve.
+
+    Raises
+    ------
+    SdnnError
+        PLOT001 when matplotlib is missing, PLOT002 when the directory cannot be created.
+    """
+    require_matplotlib()
+    directory = Path(directory)
+    try:
+        directory.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise SdnnError.at("PLOT002", f"cannot create the plot directory: {exc.strerror or exc}",
+                           str(directory)) from None
+    problem = outcome.problem
+    names = list(problem.compiled.output_names)
+    with np.errstate(all="ignore"):
+        yhat = problem.compiled.simulate(outcome.x, problem.inputs, problem.init)
+    y = problem.targets
+    t = _times(outcome)
+    written = [_plot_output(outcome, t, y, yhat, names, directory), _plot_residual(t, y, yhat, names, directory)]
+    params_png = _plot_parameters(outcome, directory)
+    if params_png is not None:
+        written.append(params_png)
+    for block, weights in outcome.result["nonlinear"].items():
+        written.append(_plot_curve(outcome, block, weights, directory))
+    return written

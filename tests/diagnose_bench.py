@@ -1,0 +1,45 @@
+"""Shared helpers of the diagnose tests: charts, virtual test-bench records and a plain simulation."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+from flowchart2sdnn.alignment import run_aligned
+from flowchart2sdnn.compiler import compile_diagram
+from flowchart2sdnn.data.csvdata import Dataset
+from flowchart2sdnn.data.excitation import ExcitationSettings, excite
+from flowchart2sdnn.diagram.model import Diagram
+from flowchart2sdnn.diagram.validate import load_diagram
+from flowchart2sdnn.network.runtime import CompiledNetwork
+
+DATA = Path(__file__).resolve().parent / "data" / "diagnose"
+REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"
+
+
+def chart(name: str) -> Diagram:
+    return load_diagram(DATA / f"{name}.yaml")
+
+
+def record(plant: Diagram, seconds: float, seed: int, noise: float, name: str | None = None,
+           **settings) -> Dataset:
+    """A record of the virtual test bench (continuous simulation of `plant`, measurement noise) as a Dataset."""
+    cols = excite(plant, ExcitationSettings(seconds=seconds, seed=seed, noise_std=noise, **settings))
+    keep = list(plant.input_names) + list(plant.output_names)
+    n = len(cols["time"])
+    return Dataset(name or f"{plant.name}-seed{seed}", {k: np.asarray(cols[k], dtype=float) for k in keep},
+                   np.asarray(cols["time"]), n, plant.sample_time, 0.0, f"seed{seed}", {k: k for k in keep})
+
+
+def simulate(diagram: Diagram, u: np.ndarray) -> np.ndarray:
+    """The compiled chart's outputs at its initial values for inputs u (Q, n_inputs), zoh alignment."""
+    compiled = CompiledNetwork(compile_diagram(diagram).network)
+    return run_aligned(compiled, compiled.theta0(), np.asarray(u, dtype=float), "zoh")
+
+
+def aprbs_input(n: int, seed: int, amplitude: float = 5.0) -> np.ndarray:
+    """A seeded piecewise-constant input (Q, 1)."""
+    rng = np.random.default_rng(seed)
+    levels = rng.uniform(-amplitude, amplitude, n // 50 + 1)
+    return np.repeat(levels, 50)[:n, None]
