@@ -104,8 +104,8 @@ def main() -> None:
     print("\nquasi-online LM, one step per sample, window Q = 25000, estimate = mean over the last 25000 steps")
     print(f"{'stage':<26}{'P':>3}{'samples':>9}{'wall [s]':>10}{'x real time':>13}{'target':>8}"
           f"{'flop/sample':>13}{'GFLOP/s':>9}")
-    for name, cn, res, wall in (("1 motor (engine.yaml)", engine, res_e, wall_e),
-                                ("2 two-mass (two_mass.yaml)", tms_net, res_t, wall_t)):
+    for name, cn, wall in (("1 motor (engine.yaml)", engine, wall_e),
+                           ("2 two-mass (two_mass.yaml)", tms_net, wall_t)):
         fl = flops_per_sample(cn)
         print(f"{name:<26}{cn.n_theta:>3}{n:>9}{wall:>10.3f}{seconds / wall:>12.1f}x{'>= 20x':>8}"
               f"{fl:>13.0f}{fl * n / wall / 1e9:>9.3f}")

@@ -52,6 +52,19 @@ def _autogroup() -> str:
         return "unknown"
 
 
+def _worker_cpu(pool: ProcessExecutor) -> dict[int, float]:
+    """CPU seconds (user + system) used so far by each worker process (Linux /proc; empty elsewhere)."""
+    out = {}
+    tick = os.sysconf("SC_CLK_TCK")
+    for pid in list(getattr(pool._pool, "_processes", {}) or {}):
+        try:
+            fields = Path(f"/proc/{pid}/stat").read_text().rsplit(")", 1)[1].split()
+        except OSError:
+            continue
+        out[pid] = (int(fields[11]) + int(fields[12])) / tick
+    return out
+
+
 def _load() -> str:
     return " ".join(f"{v:.2f}" for v in os.getloadavg())
 
@@ -90,20 +103,27 @@ def main() -> int:
     print(f"{args.workers} workers, cold pool (start-up included): {t_cold:6.2f} s wall   load {_load()}")
     serial = None
     same = True
-    ratios = []
+    ratios, idle = [], []
     # interleaved pairs: on a shared machine the load changes from minute to minute
     for k in range(args.rounds):
         serial, t_serial, cpu_serial = _timed(chart, data, settings)
+        before = _worker_cpu(pool)
         par, t_par, _ = _timed(chart, data, settings, pool)
+        after = _worker_cpu(pool)
+        busiest = max((after[p] - before.get(p, 0.0) for p in after), default=float("nan"))
         ratios.append(t_serial / t_par)
+        idle.append(cpu_serial / busiest)
         same &= all(np.array_equal(serial.x, r.x) and
                     serial.result["multistart"]["costs"] == r.result["multistart"]["costs"] for r in (first, par))
         print(f"round {k + 1}: serial {t_serial:6.2f} s wall ({cpu_serial:.2f} s CPU = "
               f"{100 * cpu_serial / t_serial:.0f} % of a core), {args.workers} workers {t_par:6.2f} s wall: "
-              f"{t_serial / t_par:.2f}x   load {_load()}")
+              f"{t_serial / t_par:.2f}x; busiest worker {busiest:.2f} s CPU -> {cpu_serial / busiest:.2f}x "
+              f"with a free core per worker   load {_load()}")
     pool.close()
-    print(f"speed-up (warm pool): median {np.median(ratios):.2f}x, best {max(ratios):.2f}x (target >= 1.8x on "
-          f"2 cores); cold pool: {t_serial / t_cold:.2f}x; results bit-identical: {same}")
+    print(f"speed-up (warm pool): median {np.median(ratios):.2f}x, best {max(ratios):.2f}x wall (target >= 1.8x "
+          f"on 2 cores); in CPU time (serial CPU / busiest worker's CPU: the wall-time speed-up with a free core "
+          f"per worker) median {np.median(idle):.2f}x; cold pool: {t_serial / t_cold:.2f}x; "
+          f"results bit-identical: {same}")
     ms = serial.result["multistart"]
     print(f"best start {ms['best_index']}, costs {[round(c, 4) if c is not None else None for c in ms['costs']]}")
     return 0 if same else 1

@@ -26,15 +26,15 @@ import yaml
 
 from flowchart2sdnn.analysis.lint import lint_diagram
 from flowchart2sdnn.compiler import compile_diagram
+from flowchart2sdnn.diagram.model import BLOCK_KINDS, FUNCTIONS
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
 from flowchart2sdnn.network.model import Network
 
 __all__ = ["valid_chart", "random_chart", "mutate", "render", "generate_case", "run_case", "Outcome", "main"]
 
-KINDS = ("sum", "gain", "integrator", "delay", "constant", "nonlinear", "function")
+KINDS = BLOCK_KINDS
 BAD_KINDS = ("integrater", "Gain", "", "lookup", "sum ", "π")
-FUNCTIONS = ("tanh", "sin", "cos", "sign_smooth")
 NAMES = ("x", "y", "w1", "w2", "MB1", "acc", "dphi", "MC", "u", "M1", "J1", "c", "d", "pi", "data", "T", "_a",
          "ω", "名前", "a b", "1x", "x-y", "a.b", "", "sdnn", "__class__")
 UNITS = ("N*m", "rad/s", "kg*m^2", "1", "s", "N*m*s/rad", "m/s^2", "rad", "V", "A", "Ohm", "furlong", "m/s*kg",

@@ -7,12 +7,19 @@ from __future__ import annotations
 
 import functools
 import json
+import os
 import sys
 
 import click
 
 from . import __version__
 from .errors import SdnnError
+
+# Our matrices are small (P x P, or M x P with P ~ 10): threaded BLAS only adds contention. On a shared 2-core
+# machine one J^T J took 1.6 s with default threads and 11 ms with one. Set before numpy is first imported;
+# a user's own setting wins.
+for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_var, "1")
 
 # Each command imports what it needs: `sdnn --help` and `sdnn lint` should not pay for numba.
 

@@ -13,8 +13,8 @@ work whose results may arrive in any order, as in ``sdnn batch``), and ``close``
   ``"local"`` for a :class:`distributed.LocalCluster` of ``workers`` processes on this machine. Dask is an
   optional extra (``pip install flowchart2sdnn[dask]``) and must be installed on the workers too.
 
-A work unit of a multi-start fit is a :class:`FitTask` (the network file as JSON, the aligned data arrays,
-the bounds and LM options) plus one start vector; :func:`fit_start` rebuilds the
+A work unit of a multi-start fit is a :class:`FitTask` (the network file as JSON, the aligned data arrays and
+the rest of the fitting problem, the bounds and LM options) plus one start vector; :func:`fit_start` rebuilds the
 :class:`~flowchart2sdnn.identify.problem.Problem` in the worker (once per worker: a small cache keyed by the
 task's hash) and runs :func:`~flowchart2sdnn.fit.lm.levenberg_marquardt` exactly as a serial run does, so
 the same seed gives bit-identical results on every executor. Results come back as the same frozen
@@ -31,6 +31,7 @@ import dataclasses
 import hashlib
 import multiprocessing
 import os
+import pickle
 import signal
 import threading
 from collections import OrderedDict
@@ -307,28 +308,28 @@ def make_executor(workers: int | None = None, scheduler: str | None = None) -> E
 
 
 # ------------------------------------------------------------------------------------------------ fit units
+#: Problem fields a worker rebuilds from the network file instead of receiving them (the chart is not needed).
+_REBUILT = ("diagram", "network", "compiled")
+
+
 @dataclass(frozen=True, eq=False)
 class FitTask:
     """Everything a worker needs to run LM from any start: small, picklable, no callbacks.
 
     Attributes
     ----------
-    network_json : str          the network file (:meth:`Network.to_json`)
-    inputs : ndarray (Q, n_in)  the aligned network input sequence
-    targets : ndarray (Q', n_out) measured outputs on the fitted rows
-    init : tuple of (str, float) initial states from the data
-    alignment : str
-    names : tuple of str        theta order (checked against the rebuilt network)
+    network_json : str      the network file (:meth:`Network.to_json`)
+    problem : dict          every other field of the Problem (aligned inputs and targets, initial states,
+                            alignment, the guard's stability floor, further records, ...), as identify built it
+    names : tuple of str    theta order (checked against the rebuilt network)
     lower, upper : ndarray (P,) bounds
     options : LMOptions
-    key : str                   sha256 of all of the above but the options: the worker's cache key
+    key : str               sha256 of the network file and the problem fields: the worker's cache key
+                            (bounds and options are not cached, they travel with every unit)
     """
 
     network_json: str
-    inputs: np.ndarray
-    targets: np.ndarray
-    init: tuple[tuple[str, float], ...]
-    alignment: str
+    problem: dict
     names: tuple[str, ...]
     lower: np.ndarray
     upper: np.ndarray
@@ -337,19 +338,17 @@ class FitTask:
 
 
 def fit_task(problem, lower: np.ndarray, upper: np.ndarray, options: LMOptions) -> FitTask:
-    """The work unit of a multi-start fit of ``problem`` (an identify.problem.Problem)."""
-    inputs = np.ascontiguousarray(problem.inputs, dtype=float)
-    targets = np.ascontiguousarray(problem.targets, dtype=float)
-    init = tuple(sorted((str(k), float(v)) for k, v in problem.init.items()))
+    """The work unit of a multi-start fit of ``problem`` (an identify.problem.Problem).
+
+    Every field of the Problem but the chart and the compiled network travels as it is, so that the worker's
+    Problem behaves exactly as the caller's (a field added to Problem later travels too).
+    """
+    fields = {f.name: getattr(problem, f.name) for f in dataclasses.fields(problem) if f.name not in _REBUILT}
     text = problem.network.to_json()
-    h = hashlib.sha256()
-    for part in (text, repr(init), problem.alignment, repr(tuple(problem.names))):
-        h.update(part.encode())
-    for a in (inputs, targets):
-        h.update(repr(a.shape).encode())
-        h.update(a.tobytes())
-    return FitTask(text, inputs, targets, init, problem.alignment, tuple(problem.names),
-                   np.array(lower, dtype=float), np.array(upper, dtype=float), options, h.hexdigest())
+    h = hashlib.sha256(text.encode())
+    h.update(pickle.dumps(fields, protocol=pickle.HIGHEST_PROTOCOL))
+    return FitTask(text, fields, tuple(problem.names), np.array(lower, dtype=float), np.array(upper, dtype=float),
+                   options, h.hexdigest())
 
 
 _cache: OrderedDict[str, Any] = OrderedDict()
@@ -372,7 +371,7 @@ def _problem(task: FitTask):
     if tuple(compiled.names) != task.names:
         raise RuntimeError(f"the rebuilt network fits {compiled.names}, the task expects {task.names}")
     # the chart itself is not needed to run LM; the worker never sees it
-    problem = Problem(None, network, compiled, task.inputs, task.targets, dict(task.init), task.alignment)
+    problem = Problem(diagram=None, network=network, compiled=compiled, **task.problem)
     with _cache_lock:
         _cache[task.key] = problem
         while len(_cache) > _CACHE_SIZE:

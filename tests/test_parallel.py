@@ -14,7 +14,7 @@ from flowchart2sdnn.cli import main
 from flowchart2sdnn.data.csvdata import read_csv
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
-from flowchart2sdnn.fit.lm import LMOptions
+from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.identify.problem import build_problem, required_columns
 from flowchart2sdnn.identify.run import IdentifySettings, identify
 from flowchart2sdnn.parallel import (
@@ -106,16 +106,27 @@ def test_map_keeps_input_order_and_submit_works(kind, processes, request):
     assert sorted(ex.result(f) for f in ex.as_completed(futures)) == [0, 1, 2]
 
 
-def test_worker_cache_builds_each_problem_once(case):
-    problem = build_problem(case["diagram"], case["ds"])
+def test_worker_problem_is_the_callers_problem(case, tmp_path):
+    """Every Problem field travels: the guard's stability floor and further training records included."""
+    from dataclasses import replace
+
+    second = write_log(tmp_path / "drive_day009.csv", seed=9, seconds=0.5)
+    more = read_csv(str(second), required_columns(case["diagram"]), None, case["diagram"].sample_time)
+    problem = build_problem(case["diagram"], case["ds"], more=[more])
+    problem = replace(problem, stability_floor=(0.5, 1.5))
     names = problem.names
     lo, hi = np.zeros(len(names)), np.full(len(names), np.inf)
-    task = fit_task(problem, lo, hi, LMOptions(max_iter=3))
-    assert _problem(task) is _problem(task)
-    # a different start gives a different fit, the same start the same one
-    a = fit_start(task, problem.compiled.theta0())
-    b = fit_start(task, problem.compiled.theta0())
-    np.testing.assert_array_equal(a.x, b.x)
+    options = LMOptions(max_iter=4)
+    task = fit_task(problem, lo, hi, options)
+    rebuilt = _problem(task)
+    assert rebuilt is _problem(task)  # built once per worker
+    assert rebuilt.stability_floor == (0.5, 1.5) and len(rebuilt.segments) == 2
+    x0 = problem.compiled.theta0()
+    direct = levenberg_marquardt(problem.fun, x0, names, lo, hi, options, guard=problem.guard,
+                                 residual=problem.residual)
+    via_task = fit_start(task, x0)
+    np.testing.assert_array_equal(direct.x, via_task.x)
+    assert direct.cost_history == via_task.cost_history
 
 
 def test_make_executor_choices(processes):

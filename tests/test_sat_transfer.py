@@ -59,3 +59,19 @@ def test_sat_continuous_oracle_clips():
     # dy/dt = L - a*y with the input clipped to L = 0.5: y -> L/a
     t = np.arange(200) * 0.01
     np.testing.assert_allclose(y, 0.25 * (1 - np.exp(-2.0 * t)), atol=1e-6)
+
+
+def test_sat_in_the_quasi_online_kernel_matches_the_runtime():
+    """The online kernel runs its own copy of the network: on noise-free data made by the runtime at the true
+    values, it must see zero error (a wrong clip would leave a residual and move the parameters)."""
+    from flowchart2sdnn.fit.online import OnlineOptions, quasi_online
+
+    d = diagram_from_text(CHART)
+    cn = CompiledNetwork(compile_diagram(d).network)
+    u = np.sin(np.linspace(0, 12, 300))[:, None] * 1.3
+    theta = np.array([0.5, 2.0])
+    assert np.any(np.abs(u) > 0.5)  # the clip is active in this record
+    y = cn.simulate(theta, u)
+    res = quasi_online(cn, u, y, theta, options=OnlineOptions(window=50, average=10, block=20))
+    assert res.mean_cost < 1e-20
+    np.testing.assert_allclose(res.theta_final, theta, rtol=1e-9)

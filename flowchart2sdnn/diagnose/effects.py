@@ -21,7 +21,8 @@ friction       speed               nonlinear curve of the speed (tanh neurons wi
 damping        speed, speed diff.  viscous gain with a new parameter (0) in the torque sum(s)
 dead_time      input               a delay of n samples in front of every consumer of the input
 saturation     input               L*sat((u - o)/L) + o: a hard clip at o -/+ L, L scanned in the data range
-backlash       spring angle        the spring torque c*x becomes c*x + odd learned curve (v = 0) of x
+backlash       spring angle        c*x becomes c*(x - g*sat(x/g)): a dead zone of half gap g (scanned)
+spring_curve   spring angle        c*x becomes c*x + an odd learned curve (v = 0) of x
 cogging        speed               phi = integral(speed); A sin(p phi) + B cos(p phi) (A = B = 0) in the sum
 =============  ==================  =====================================================================
 """
@@ -55,6 +56,7 @@ __all__ = [
     "DeadTime",
     "Saturation",
     "Backlash",
+    "SpringCurve",
     "Cogging",
     "BUILTIN_EFFECTS",
     "builtin_effects",
@@ -264,10 +266,63 @@ class Saturation:
 
 @dataclass(frozen=True)
 class Backlash:
-    """The spring torque ``c x`` becomes ``c x + sum v_i tanh(a_i x)`` (odd, v = 0): a learnable dead zone."""
+    """A dead zone in the shaft: the spring torque ``c x`` becomes ``c (x - g sat(x / g))``, g the half gap.
+
+    Inside ``|x| < g`` the shaft transmits nothing; outside it acts as before, shifted by the gap. At g = 0
+    the patch is neutral but the clip is undefined, so g is scanned as fractions of the angle's RMS (like a
+    saturation limit) and learned by the refit.
+    """
+
+    fractions: tuple[float, ...] = (0.05, 0.1, 0.2, 0.35, 0.5)
+    name: str = "backlash"
+    neutral: bool = False
+    extra_dof: int = 0
+
+    def places(self, diagram: Diagram) -> tuple[Place, ...]:
+        return spring_angles(diagram)
+
+    def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
+        return tuple(round(f * scales.scale(place.at), 15) for f in self.fractions)
+
+    def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
+        gap = float(option) if option else 1e-3
+        x = place.at
+        spring = diagram.block(place.via)
+        taken: set[str] = set()
+
+        def new(base: str) -> str:
+            n = fresh_name(diagram, base, taken)
+            taken.add(n)
+            return n
+
+        g, clip, width, inside = new(f"{x}_gap"), new(f"bl_{x}_clip"), new(f"bl_{x}_g"), new(f"bl_{x}")
+        unit = next((b.unit for b in diagram.blocks if b.name == x), None)
+        param = Parameter(g, gap, unit=unit, min=0.0, description=f"half gap of the backlash in {x} (diagnose)")
+        blocks = [
+            Block(clip, "function", (Term(x),), k=parse_expr(f"1/{g}"), f="sat"),
+            Block(width, "gain", (Term(clip),), k=parse_expr(g), unit=unit),
+            Block(inside, "sum", (Term(x), Term(width, -1)), unit=unit,
+                  description=f"{x} beyond the backlash (diagnose)"),
+        ]
+        patched = add_blocks(diagram, blocks, [param])
+        return replace(patched, blocks=tuple(
+            replace(b, inputs=tuple(Term(inside, t.sign) if t.signal == x else t for t in b.inputs))
+            if b.name == spring.name else b for b in patched.blocks))
+
+    def describe(self) -> str:
+        return "backlash: a dead zone of learned width in the shaft angle before the spring"
+
+    def label(self, option) -> str:
+        return f"gap={float(option):.3g}"
+
+
+@dataclass(frozen=True)
+class SpringCurve:
+    """The spring torque ``c x`` becomes ``c x + sum v_i tanh(a_i x)`` (odd, v = 0): a learned stiffness curve
+    (hardening, softening, or a smooth backlash)."""
 
     slopes: tuple[float, ...] = (20.0, 5.0, 1.5)
-    name: str = "backlash"
+    name: str = "spring_curve"
     neutral: bool = True
     extra_dof: int = 0
 
@@ -281,20 +336,20 @@ class Backlash:
         scale = float(option) if option else 1.0
         spring = diagram.block(place.via)
         lin = fresh_name(diagram, f"{spring.name}_lin")
-        curve = fresh_name(diagram, f"bl_{place.at}", {lin})
-        block = _curve(curve, place.at, self.slopes, scale, False, f"backlash of {place.at} (diagnose)")
+        curve = fresh_name(diagram, f"sc_{place.at}", {lin})
+        block = _curve(curve, place.at, self.slopes, scale, False, f"spring curve of {place.at} (diagnose)")
         blocks = []
         for b in diagram.blocks:
             if b.name == spring.name:
                 blocks.append(replace(b, name=lin))
                 blocks.append(Block(spring.name, "sum", (Term(lin), Term(curve)), unit=spring.unit,
-                                    description="spring torque with backlash (diagnose)"))
+                                    description="spring torque with a learned curve (diagnose)"))
             else:
                 blocks.append(b)
         return add_blocks(replace(diagram, blocks=tuple(blocks)), [block])
 
     def describe(self) -> str:
-        return "backlash: the spring torque becomes a learned odd curve of the shaft angle"
+        return "spring_curve: the spring torque becomes c*x plus a learned odd curve of the shaft angle"
 
     def label(self, option) -> str:
         return ""
@@ -350,7 +405,7 @@ class Cogging:
 
 # ------------------------------------------------------------------------------------------------ registry
 BUILTIN_EFFECTS: dict[str, Effect] = {
-    e.name: e for e in (Friction(), Damping(), DeadTime(), Saturation(), Backlash(), Cogging())
+    e.name: e for e in (Friction(), Damping(), DeadTime(), Saturation(), Backlash(), SpringCurve(), Cogging())
 }
 
 

@@ -418,4 +418,5 @@ def _round_entry(r: int, s: Score, before: Fitted, after: Fitted | None, accepte
         "aic_before": _num(before.aic), "aic_after": _num(a.aic) if a else None,
         "bic_before": _num(before.bic), "bic_after": _num(a.bic) if a else None,
         "before": _summary(before), "after": _summary(a) if a else None,
+        "parameters": ({k: v["value"] for k, v in a.identification.result["parameters"].items()} if a else None),
     }

@@ -208,7 +208,8 @@ def _decrease(G: np.ndarray, g: np.ndarray, rcond: float = RCOND, sign: np.ndarr
         return 0.5 * float(np.sum(c * c / w[keep])), int(np.sum(keep))
 
 
-def gauss_newton_decrease(J: np.ndarray, e: np.ndarray, rcond: float = RCOND) -> tuple[float, int]:
+def gauss_newton_decrease(J: np.ndarray, e: np.ndarray, rcond: float = RCOND,
+                          sign: np.ndarray | None = None) -> tuple[float, int]:
     """Decrease of 1/2 ||e - J d||^2 achieved by the least-squares step d, and the numerical rank used.
 
     Parameters
@@ -218,6 +219,8 @@ def gauss_newton_decrease(J: np.ndarray, e: np.ndarray, rcond: float = RCOND) ->
     rcond : float
         Eigenvalues of the Gram matrix of the column-normalised J below ``rcond`` times the largest count as
         zero (singular values below ``sqrt(rcond)``).
+    sign : (P,) ndarray, optional
+        +1 for a quantity on its lower bound (it may only increase), -1 on its upper bound, 0 free.
 
     Returns
     -------
@@ -225,7 +228,7 @@ def gauss_newton_decrease(J: np.ndarray, e: np.ndarray, rcond: float = RCOND) ->
     """
     if J.ndim != 2 or J.shape[0] != e.shape[0]:
         raise ValueError(f"J has shape {J.shape}, e has shape {e.shape}")
-    return _decrease(*_gram(J, e), rcond)
+    return _decrease(*_gram(J, e), rcond, None if sign is None else np.asarray(sign, dtype=float))
 
 
 def new_quantities(before: Diagram, after: Diagram) -> tuple[str, ...]:

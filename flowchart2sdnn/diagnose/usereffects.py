@@ -32,6 +32,7 @@ so every structural mistake is reported as for a chart, naming the effects file 
 
 from __future__ import annotations
 
+import re
 from collections.abc import Mapping
 from dataclasses import dataclass, field, replace
 from pathlib import Path
@@ -63,10 +64,16 @@ _KEYS = ("description", "attach", "parameters", "blocks", "output", "options", "
 _PLACEHOLDERS = ("at", "name", "option", "sum", "spring")
 
 
+_NUMBER = re.compile(r"^[+-]?(\d+(\.\d*)?|\.\d+)([eE][+-]?\d+)?$")
+
+
 def _substitute(value, table: Mapping[str, str]):
     if isinstance(value, str):
+        original = value
         for key, text in table.items():
             value = value.replace("{" + key + "}", text)
+        if value != original and _NUMBER.match(value):  # "{option}" in a numeric field stays a number
+            return int(value) if value.lstrip("+-").isdigit() else float(value)
         return value
     if isinstance(value, dict):
         return {_substitute(k, table): _substitute(v, table) for k, v in value.items()}

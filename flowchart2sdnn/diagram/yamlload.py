@@ -106,21 +106,28 @@ def load_yaml(path: str | Path) -> LocatedYaml:
     return dataclasses.replace(doc, sha256=hashlib.sha256(raw).hexdigest())
 
 
-def _check_nesting(text: str, name: str) -> None:
+def _check_nesting(text: str, name: str) -> bool:
     """Refuse deep nesting from the event stream, before any recursive composer sees the document.
 
     libyaml's parser is iterative but PyYAML's composer recurses, and the C one (CSafeLoader) overflows the C
-    stack (a segfault, not an exception) on a few ten thousand nested brackets.
+    stack (a segfault, not an exception) on a few ten thousand nested brackets. Returns whether the document
+    uses an alias (only then can it expand to more values than it has nodes).
     """
     depth = 0
+    aliases = False
+    opening, closing = (yaml.MappingStartEvent, yaml.SequenceStartEvent), (yaml.MappingEndEvent, yaml.SequenceEndEvent)
     for event in yaml.parse(text, Loader=_LOADER):
-        if isinstance(event, (yaml.MappingStartEvent, yaml.SequenceStartEvent)):
+        kind = type(event)
+        if kind in opening:
             depth += 1
             if depth > MAX_DEPTH + 1:
                 raise SdnnError.at("YAML005", f"nesting deeper than {MAX_DEPTH} levels", name,
                                    event.start_mark.line + 1, event.start_mark.column + 1)
-        elif isinstance(event, (yaml.MappingEndEvent, yaml.SequenceEndEvent)):
+        elif kind in closing:
             depth -= 1
+        elif kind is yaml.AliasEvent:
+            aliases = True
+    return aliases
 
 
 def parse_yaml_text(text: str, name: str = "<chart>") -> LocatedYaml:
@@ -128,7 +135,7 @@ def parse_yaml_text(text: str, name: str = "<chart>") -> LocatedYaml:
     if len(text) > MAX_CHART_BYTES:
         raise SdnnError.at("YAML002", f"chart text longer than {MAX_CHART_BYTES} characters", name)
     try:
-        _check_nesting(text, name)
+        aliases = _check_nesting(text, name)
         nodes = list(yaml.compose_all(text, Loader=_LOADER))
     except yaml.MarkedYAMLError as exc:
         mark = exc.problem_mark or exc.context_mark
@@ -155,7 +162,8 @@ def parse_yaml_text(text: str, name: str = "<chart>") -> LocatedYaml:
         raise SdnnError.at("YAML004", "more than one YAML document ('---'); a chart is one document", name, line)
     if not nodes or nodes[0] is None:
         raise SdnnError.at("YAML006", "empty file, expected a chart (a mapping with 'sdnn: 1')", name, 1)
-    _check_expansion(nodes[0], name)
+    if aliases:
+        _check_expansion(nodes[0], name)
     builder = _Builder(name)
     data = builder.build(nodes[0], (), 0)
     return LocatedYaml(name, data, builder.marks)

@@ -395,10 +395,23 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
 
     Returns (status or None, accepted point or None, mu, tiny step flag).
     """
-    A = Ju.T @ Ju
+    with np.errstate(over="ignore", invalid="ignore"):
+        A = Ju.T @ Ju
+    scale = None
+    if not np.all(np.isfinite(A)) or not np.all(np.isfinite(g)):
+        # J^T J overflows near a divergence: solve with unit-norm columns instead (Marquardt's scaling), which
+        # keeps the step finite; trainlm's plain mu*I is used everywhere else
+        scale = np.linalg.norm(Ju / np.max(np.abs(Ju), axis=0, initial=1.0), axis=0) * np.max(
+            np.abs(Ju), axis=0, initial=1.0)
+        scale[~(scale > 0) | ~np.isfinite(scale)] = 1.0
+        Js = Ju / scale
+        A, gs = Js.T @ Js, Js.T @ point.e
     x_norm = float(np.linalg.norm(point.x))
     for _ in range(opt.max_mu_tries):
-        du = _damped_step(Ju, point.e, A, g, mu)
+        if scale is None:
+            du = _damped_step(Ju, point.e, A, g, mu)
+        else:
+            du = _damped_step(Js, point.e, A, gs, mu) / scale
         u_t = point.u + du
         x_t = bounds.to_external(u_t)
         tiny = float(np.linalg.norm(x_t - point.x)) <= opt.min_rel_step * (opt.min_rel_step + x_norm)

@@ -1,14 +1,17 @@
 """Quasi-online Levenberg-Marquardt with a sliding window (paper section 3.1, Tables 1-2, Figs. 8-9).
 
-The model runs free alongside the record with the current parameters; RTRL gives each new sample's Jacobian
-row; a FIFO window keeps the last Q rows and the running sums of the normal equations; one LM step every
-``every`` samples. The whole time loop is one numba kernel (:mod:`flowchart2sdnn.network.online_kernel`,
-whose docstring states the algorithm, the first-order correction of the stale window errors and the mu
-rule); this module validates the arguments, runs the kernel in chunks (progress callback, Ctrl-C between
-chunks) and packs the result. Memory is O(Q P + K P) whatever the record length, plus the decimated records.
+The model runs free alongside the record with the accepted parameters; RTRL gives each new sample's
+Jacobian row; a FIFO window keeps the last Q rows and the running sums of the normal equations; every
+``every`` samples one LM step from the accepted parameters on the current window gives the *trial*, which a
+second copy of the network simulates; every ``block`` samples the trial is accepted or refused and mu
+adapted (trainlm's x10 / /10). The whole time loop is one numba kernel
+(:mod:`flowchart2sdnn.network.online_kernel`, whose docstring states the algorithm, the first-order
+correction of the stale window errors and the mu rule and why); this module validates the arguments, runs
+the kernel in chunks (progress callback, Ctrl-C between chunks) and packs the result. Memory is O(Q P + K P)
+whatever the record length, plus the decimated records.
 
-The reported estimate is the mean of the parameters over the last K = ``average`` LM steps and the reported
-error the mean window cost over the same steps, as in the paper's tables.
+The reported estimate is the mean of the accepted parameters over the last K = ``average`` LM steps and the
+reported error the mean window cost over the same steps, as in the paper's Tables 1 and 2.
 """
 
 from __future__ import annotations
@@ -44,9 +47,11 @@ class OnlineOptions:
     every : one LM step every `every` samples (paper: 1).
     average : K, the estimate is the mean over the last K LM steps (paper: 25000).
     start : first sample with an LM step (paper: 5 s = 5000); rows are collected from sample 0.
-    mu0, mu_inc, mu_dec, mu_min, mu_max : damping schedule (trainlm names), applied once per `block`.
+    mu0, mu_inc, mu_dec, mu_min, mu_max : damping schedule (trainlm names): mu is multiplied by mu_dec when a
+        block accepts the trial, by mu_inc when it refuses it or the trial diverges.
     record_every : decimation of the parameter and cost records.
-    block : samples per accept/reject test of the mu rule (see :mod:`flowchart2sdnn.network.online_kernel`).
+    block : samples per accept/refuse test of the trial (see :mod:`flowchart2sdnn.network.online_kernel`);
+        at most one accepted LM iterate per block.
     chunk : samples per kernel call (progress callback and Ctrl-C act between chunks).
     """
 
@@ -87,21 +92,22 @@ class OnlineResult:
     Attributes
     ----------
     names : tuple of str                 theta order
-    theta_mean : ndarray (P,)            mean of the external parameters over the last `averaged_steps` steps
-    theta_final : ndarray (P,)           parameters after the last processed sample
-    steps : int                          LM steps taken
+    theta_mean : ndarray (P,)            mean of the accepted parameters (external) over the last
+                                         `averaged_steps` LM steps
+    theta_final : ndarray (P,)           accepted parameters after the last processed sample
+    steps : int                          LM steps (solves) attempted: one per `every` samples from `start`
     status, message : str                a key of ``STATUS_MESSAGES`` and a sentence with details
     trajectory_time : ndarray (n_rec,)   s, samples ``0, record_every, ...`` times the sample time
-    trajectory : ndarray (n_rec, P)      parameters after each recorded sample
+    trajectory : ndarray (n_rec, P)      accepted parameters after each recorded sample
     cost_time, cost : ndarray (n_rec,)   window cost E = 1/2 sum of the window's a-priori errors squared
     mean_cost : float                    mean of E over the last `averaged_steps` steps
     mu_trajectory : ndarray (n_rec,)     mu at the recorded samples
     samples : int                        samples processed
     averaged_steps : int                 min(steps, K)
-    accepted_blocks, rejected_blocks : int      outcomes of the mu rule
-    diverged : int                       divergences (non-finite model or weights) handled
+    accepted_blocks, rejected_blocks : int      trials accepted / refused (a diverged trial counts as refused)
+    diverged : int                       divergences handled (non-finite model, trial or weights)
     divergence_time : ndarray            s, the first (at most 1000) divergence times
-    chol_fallbacks, skipped_steps : int  steps solved with a larger mu / not solvable at any mu <= mu_max
+    chol_fallbacks, skipped_steps : int  steps solved with a larger damping (rounding) / not solvable
     mu_final : float
     """
 

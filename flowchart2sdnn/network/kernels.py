@@ -156,9 +156,8 @@ def jacobian_kernel(
                     x = a_buf[src_slot, src]
                     # before t = 0 the source is history, whose sensitivity is zero
                     if t - d >= 0 and w != 0.0:
-                        s_src = s_buf[src_slot, src]
                         for p in range(n_theta):
-                            dn[p] += w * s_src[p]
+                            dn[p] += w * s_buf[src_slot, src, p]
                 elif kind == 1:
                     x = inputs[max(t - d, 0), conn_src[c]]
                 else:
@@ -170,13 +169,11 @@ def jacobian_kernel(
             a = _transfer(code, n)
             a_buf[slot, k] = a
             g = _slope(code, n, a)
-            s_k = s_buf[slot, k]
             for p in range(n_theta):
-                s_k[p] = g * dn[p]
+                s_buf[slot, k, p] = g * dn[p]
         for o in range(n_rec):
             r = record[o]
             y[t, o] = a_buf[slot, r]
-            s_r = s_buf[slot, r]
             for p in range(n_theta):
-                dy[t, o, p] = s_r[p]
+                dy[t, o, p] = s_buf[slot, r, p]
     return y, dy

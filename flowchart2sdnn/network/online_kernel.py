@@ -29,7 +29,9 @@ the trial point. This is the gain-ratio idea of LM/trust-region methods; the pla
 test of trainlm does not carry over, because the step minimises the window's cost, not the block's: a good
 window step may raise the cost of a short block, and a bad one may lower it by luck. Accepted: the model
 takes the trial's parameters and state, ``mu *= mu_dec``; refused: ``mu *= mu_inc``; mu stays within
-``[mu_min, mu_max]``.
+``[mu_min, mu_max]``. (Measured on the motor, a motor with a fixed tanh basis and the two-mass bench: the
+plain block-cost test let the two-mass run drift to a model with errors of 10^5 rad/s, and "linear model held
+and block cost not higher" stalled at mu_max far from the optimum; the test above converged on all three.)
 
 Divergence: a non-finite (or overflowing) trial output refuses the trial at once (``mu *= mu_inc``); a
 non-finite model output adopts the trial's parameters and state when they are finite, else restarts both from
@@ -367,6 +369,8 @@ def _transfer(code, n):
         return math.tanh(n)
     if code == 2:
         return math.sin(n)
+    if code == 4:
+        return min(1.0, max(-1.0, n))
     return math.cos(n)
 
 
@@ -378,6 +382,8 @@ def _slope(code, n, a):
         return 1.0 - a * a
     if code == 2:
         return math.cos(n)
+    if code == 4:
+        return 1.0 if -1.0 < n < 1.0 else 0.0
     return -math.sin(n)
 
 

@@ -1,0 +1,149 @@
+"""The score test: the predicted cost decrease of one Gauss-Newton step, against independent oracles.
+
+Oracles: scipy's least squares for the GN decrease; central finite differences of plain simulations for the
+whole screen (patch -> compile -> RTRL -> Gram -> projection).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+
+import numpy as np
+import pytest
+from diagnose_bench import chart, record
+from scipy.linalg import lstsq
+
+from flowchart2sdnn.diagnose.effects import Damping, DeadTime, Friction
+from flowchart2sdnn.diagnose.graph import Place, speeds
+from flowchart2sdnn.diagnose.score import Candidate, gauss_newton_decrease, new_quantities, screen
+from flowchart2sdnn.identify.problem import build_problem
+
+
+def _lstsq_decrease(J, e):
+    d = lstsq(J, e)[0]
+    r = e - J @ d
+    return 0.5 * (e @ e - r @ r)
+
+
+def test_gn_decrease_equals_the_least_squares_step():
+    rng = np.random.default_rng(1)
+    J = rng.standard_normal((400, 5)) * np.array([1e-3, 1.0, 50.0, 2.0, 1e4])  # badly scaled columns
+    e = rng.standard_normal(400)
+    dec, rank = gauss_newton_decrease(J, e)
+    assert rank == 5
+    assert dec == pytest.approx(_lstsq_decrease(J, e), rel=1e-9)
+
+
+def test_gn_decrease_ignores_zero_and_repeated_columns():
+    rng = np.random.default_rng(2)
+    J = rng.standard_normal((300, 3))
+    e = rng.standard_normal(300)
+    Jx = np.column_stack([J, np.zeros(300), 2.5 * J[:, 1]])
+    dec, rank = gauss_newton_decrease(Jx, e)
+    assert rank == 3
+    assert dec == pytest.approx(_lstsq_decrease(J, e), rel=1e-9)
+
+
+def test_a_quantity_on_its_lower_bound_cannot_step_down():
+    rng = np.random.default_rng(3)
+    J = rng.standard_normal((500, 2))
+    e = J @ np.array([1.0, -2.0]) + 0.01 * rng.standard_normal(500)  # the second quantity wants to go down
+    free, _ = gauss_newton_decrease(J, e)
+    held, rank = gauss_newton_decrease(J, e, sign=np.array([0.0, 1.0]))
+    assert rank == 1 and held == pytest.approx(_lstsq_decrease(J[:, :1], e), rel=1e-9) and held < free
+    up, _ = gauss_newton_decrease(J, -e, sign=np.array([0.0, 1.0]))  # now it wants to go up: allowed
+    assert up == pytest.approx(free, rel=1e-9)
+
+
+# ------------------------------------------------------------------------------------------------ screen
+@pytest.fixture(scope="module")
+def setup():
+    data = record(chart("one_mass_friction_plant"), 2.0, seed=4, noise=0.02)
+    base = chart("one_mass")  # at its (wrong) initial values: the score does not need a converged fit
+    problem = build_problem(base, data)
+    (speed,) = speeds(base)
+    cands = [Candidate(Friction(), speed, 0.3, base), Candidate(Damping(), speed, None, base),
+             Candidate(DeadTime(), Place("F", "input"), 2, base), Candidate(DeadTime(), Place("F", "input"), 5, base)]
+    return data, base, problem, cands
+
+
+def _fd_jacobian(problem, x):
+    cols = []
+    for i in range(x.size):
+        h = 1e-6 * max(1.0, abs(x[i]))
+        xp, xm = x.copy(), x.copy()
+        xp[i] += h
+        xm[i] -= h
+        cols.append(-(problem.residual(xp) - problem.residual(xm)) / (2 * h))  # d yhat = -d e
+    return np.column_stack(cols)
+
+
+def _oracle_predicted_cost(diagram, data):
+    p = build_problem(diagram, data)
+    x = p.compiled.theta0()
+    e = p.residual(x)
+    J = _fd_jacobian(p, x)
+    keep = np.linalg.norm(J, axis=0) > 0
+    return 0.5 * e @ e - _lstsq_decrease(J[:, keep], e)
+
+
+def test_every_score_matches_finite_differences_and_least_squares(setup):
+    data, base, problem, cands = setup
+    scr = screen(cands, problem, data)
+    base_gn = _oracle_predicted_cost(base, data)
+    by = {(s.candidate.name, s.candidate.label): s for s in scr.scores}
+    assert set(by) == {("friction", ""), ("damping", ""), ("dead_time", "n=2"), ("dead_time", "n=5")}
+    for (name, label), s in by.items():
+        if name == "damping":
+            continue  # on its lower bound: checked below
+        oracle = base_gn - _oracle_predicted_cost(s.candidate.diagram, data)
+        assert s.score == pytest.approx(oracle, rel=2e-4, abs=1e-6 * scr.baseline.cost), (name, label)
+
+
+def test_a_candidate_the_chart_already_has_scores_zero(setup):
+    # the chart has viscous friction b*v: a second viscous gain adds nothing beyond it (restricted to the
+    # new column alone, a GN step would predict a large decrease - the look-alike the full step rules out)
+    data, base, problem, cands = setup
+
+    @dataclasses.dataclass(frozen=True)
+    class FreeDamping(Damping):  # without the lower bound, so that only the collinearity can make it zero
+        def patch(self, diagram, place, option=None):
+            d = Damping.patch(self, diagram, place, option)
+            return dataclasses.replace(d, parameters=tuple(dataclasses.replace(p, min=None)
+                                                           for p in d.parameters))
+
+    scr = screen([Candidate(FreeDamping(), cands[1].place, None, base)], problem, data)
+    (s,) = scr.scores
+    assert s.scored and s.dof == 0 and abs(s.score) < 1e-8 * scr.baseline.cost
+    # the new column alone would promise a large decrease
+    p = build_problem(s.candidate.diagram, data)
+    e, J = p.fun(p.compiled.theta0())
+    alone, _ = gauss_newton_decrease(J[:, [p.names.index("b_v")]], e)
+    assert alone > 1e-3 * scr.baseline.cost
+
+
+def test_the_joint_pass_gives_each_candidate_its_own_score(setup):
+    data, base, problem, cands = setup
+    together = {s.candidate.title(): s.score for s in screen(cands, problem, data).scores}
+    for c in cands:
+        (alone,) = screen([c], problem, data).scores
+        assert alone.score == pytest.approx(together[c.title()], rel=1e-8, abs=1e-9)
+
+
+def test_scores_are_ranked_and_significance_reported(setup):
+    data, base, problem, cands = setup
+    scr = screen(cands, problem, data)
+    scored = [s.score for s in scr.scores if s.scored]
+    assert scored == sorted(scored, reverse=True)
+    best = scr.scores[0]
+    assert best.candidate.name == "friction" and best.p_value < 1e-6 and best.dof >= 1
+    assert scr.passes["jacobian"] >= 2
+
+
+def test_new_quantities_lists_parameters_and_curve_weights(setup):
+    data, base, problem, cands = setup
+    assert new_quantities(base, cands[1].diagram) == ("b_v",)
+    names = new_quantities(base, cands[0].diagram)
+    assert len(names) == 3 * 4 and "fric_v.v1" in names and "fric_v.b4" in names
+    p = build_problem(cands[0].diagram, data)
+    assert set(names) == set(p.names) - set(problem.names)
