@@ -1,4 +1,4 @@
-"""Fuzz the chart front end: generated and mutated charts through load, validate, lint and compile.
+"""Fuzz the chart front end: generated and mutated charts through load, validate, lint, compile and identify.
 
 Every case must end in a Diagram/Network or an SdnnError (a user error with a location); anything else is a
 crash. ``python benchmarks/fuzz_charts.py [N] [--seed S]`` runs N cases (default 10000) and prints the number
@@ -334,8 +334,31 @@ class Outcome:
     detail: str | None = None
 
 
-def run_case(data: bytes, path: Path) -> Outcome:
-    """Write `data` to `path`, then load, lint, compile and serialize; classify what happened."""
+def identify_case(diagram, network, path: Path) -> None:
+    """Identify a compiled chart on a small seeded random record (2 LM iterations): it must end in a result
+    whose JSON is strict (no NaN) or in an SdnnError, whatever the chart."""
+    import json
+
+    import numpy as np
+
+    from flowchart2sdnn.data.csvdata import read_csv, write_csv
+    from flowchart2sdnn.identify.problem import required_columns
+    from flowchart2sdnn.identify.run import IdentifySettings, identify
+
+    rng = np.random.default_rng(len(network.weights))
+    cols = required_columns(diagram)
+    n = 40
+    columns = {"time": np.arange(n) * diagram.sample_time}
+    columns.update({c: rng.normal(size=n) for c in cols})
+    data_path = path.with_suffix(".csv")
+    write_csv(data_path, columns)
+    ds = read_csv(data_path, cols, None, diagram.sample_time)
+    outcome = identify(diagram, ds, None, IdentifySettings(max_iter=2))
+    json.dumps(outcome.result, allow_nan=False)
+
+
+def run_case(data: bytes, path: Path, with_identify: bool = True) -> Outcome:
+    """Write `data` to `path`, then load, lint, compile, serialize and identify; classify what happened."""
     path.write_bytes(data)
     try:
         diagram = load_diagram(path)
@@ -343,6 +366,11 @@ def run_case(data: bytes, path: Path) -> Outcome:
         net = compile_diagram(diagram).network
         if Network.from_json(net.to_json()) != net:
             return Outcome("crash", detail="network file does not load back to the same network")
+        if with_identify:
+            try:
+                identify_case(diagram, net, path)
+            except SdnnError as exc:
+                return Outcome("error", "identify:" + exc.diagnostics[0].code)
     except SdnnError as exc:
         d = exc.diagnostics[0]
         if d.location is None or d.location.file != str(path) or d.location.line is None:

@@ -50,6 +50,7 @@ __all__ = [
     "ProcessExecutor",
     "DaskExecutor",
     "make_executor",
+    "start_method",
     "FitTask",
     "fit_task",
     "fit_start",

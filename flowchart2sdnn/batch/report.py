@@ -322,6 +322,7 @@ def _parameter_plot(fleet: Fleet, p: str, flagged: dict, path: Path) -> None:
         else:
             ax.errorbar(xs, ys, yerr=err, lw=1.5, marker="o", ms=4, capsize=2,
                         label=f"{drive} ({d['change_percent']:+.0f} %)")
+    _value_limits(ax, [q.row[p] for pts in fleet.drives.values() for q in pts if q.row.get(p) is not None])
     ax.set_title(f"{p} per drive ({sum(1 for k in flagged if k[1] == p)} drifting, in colour)")
     ax.set_xlabel("day")
     ax.set_ylabel(p)
@@ -332,14 +333,32 @@ def _parameter_plot(fleet: Fleet, p: str, flagged: dict, path: Path) -> None:
     _save(fig, path)
 
 
-def _drive_plot(fleet: Fleet, drive: str, flagged: dict, path: Path) -> None:
+def _value_limits(ax, ys: Sequence[float]) -> None:
+    """Scale the axis to the values, not their intervals: one failed day's huge interval would flatten the rest."""
+    if len(ys) < 2:
+        return
+    lo, hi = float(min(ys)), float(max(ys))
+    pad = 0.1 * (hi - lo) if hi > lo else 0.05 * abs(hi) or 1.0
+    ax.set_ylim(lo - pad, hi + pad)
+
+
+def _drive_plot(fleet: Fleet, drive: str, table: dict, path: Path) -> None:
     n = max(1, len(fleet.parameters))
     fig = _pyplot_free_figure(figsize=(7, 1.9 * n + 0.6))
     axes = fig.subplots(n, 1, sharex=True, squeeze=False)[:, 0]
     for ax, p in zip(axes, fleet.parameters, strict=False):
-        xs, ys, err = _errorbars(fleet.drives[drive], p)
-        d = flagged.get((drive, p))
+        points = fleet.drives[drive]
+        xs, ys, err = _errorbars(points, p)
+        info = table.get((drive, p)) or {}
+        d = info if info.get("drift") else None
         ax.errorbar(xs, ys, yerr=err, marker="o", ms=3, capsize=2, color="C3" if d else "C0")
+        odd = set(str(info.get("outliers") or "").split())
+        out = [(x, q.row[p]) for x, q in zip(_xs(points), points, strict=True)
+               if q.row.get(p) is not None and _day_text(q.day) in odd]
+        if out:
+            ax.plot([o[0] for o in out], [o[1] for o in out], "x", color="k", ms=8, label="off the trend")
+            ax.legend(fontsize="x-small", loc="best")
+        _value_limits(ax, ys)
         ax.set_ylabel(p)
         ax.grid(alpha=0.3)
         if d:
@@ -371,8 +390,9 @@ def write_report(fleet: Fleet, drift: list[dict], directory: str | os.PathLike, 
         for p in fleet.parameters:
             _parameter_plot(fleet, p, flagged, out / f"{_safe(p)}.png")
             written.append(str(out / f"{_safe(p)}.png"))
+        table = {(d["drive"], d["parameter"]): d for d in drift}
         for drive in fleet.drives:
-            _drive_plot(fleet, drive, flagged, out / f"drive_{_safe(drive)}.png")
+            _drive_plot(fleet, drive, table, out / f"drive_{_safe(drive)}.png")
             written.append(str(out / f"drive_{_safe(drive)}.png"))
     keys = ["drive", "parameter", "n", "first_day", "last_day", "first", "last", "mean", "slope_per_day",
             "slope_stderr", "t", "change_percent", "ci_halfwidth", "outliers", "drift"]

@@ -112,9 +112,9 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     if not records:
         raise ValueError("identify needs at least one training record")
     train, more = records[0], records[1:]
-    if more and (settings.split is not None or settings.online or executor is not None):
-        raise SdnnError.at("DATA003", "several training records cannot be combined with --split, --online or "
-                           "--workers/--scheduler (yet)", more[0].path, hint="give one record, or drop that option")
+    if more and (settings.split is not None or settings.online):
+        raise SdnnError.at("DATA003", "several training records cannot be combined with --split or --online (yet)",
+                           more[0].path, hint="give one record, or drop that option")
     full = train
     if settings.split is not None:
         if validation is not None:
