@@ -16,10 +16,10 @@ from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.diagnose.effects import (
     BUILTIN_EFFECTS,
     Backlash,
-    SpringCurve,
     Cogging,
     Damping,
     DeadTime,
+    DeadZone,
     Friction,
     Saturation,
     Scales,
@@ -79,7 +79,7 @@ def test_the_spring_angle_is_found_with_its_spring_gain():
 
 # ------------------------------------------------------------------------------------------------ neutral
 NEUTRAL = [(Friction(), "w2", 4.0), (Friction(), "w1", 4.0), (Damping(), "w2", None), (Damping(), "dw", None),
-           (SpringCurve(), "dphi", 0.01), (Cogging(), "w1", 3), (Cogging(), "w2", 1)]
+           (Backlash(), "dphi", 0.01), (Cogging(), "w1", 3), (Cogging(), "w2", 1)]
 
 
 @pytest.mark.parametrize("effect,at,option", NEUTRAL, ids=lambda x: str(x)[:20])
@@ -177,8 +177,8 @@ def test_friction_with_weights_set_equals_a_hand_written_curve():
     np.testing.assert_allclose(simulate(patched, u), simulate(diagram_from_text(hand), u), rtol=1e-10, atol=1e-10)
 
 
-def test_backlash_equals_a_hand_written_dead_zone_in_the_shaft():
-    patched = Backlash().patch(TWO, _place(spring_angles(TWO), "dphi"), 0.003)
+def test_dead_zone_equals_a_hand_written_dead_zone_in_the_shaft():
+    patched = DeadZone().patch(TWO, _place(spring_angles(TWO), "dphi"), 0.003)
     assert patched.parameter("dphi_gap").init == 0.003 and patched.parameter("dphi_gap").min == 0.0
     hand = CHART_WITH.replace(", EXTRA", "").replace(
         "  MC:   {type: gain, in: dphi, k: c}\n",
@@ -186,16 +186,16 @@ def test_backlash_equals_a_hand_written_dead_zone_in_the_shaft():
         "  gw:   {type: gain, in: cl, k: 0.003}\n  dz:   {type: sum, in: [dphi, -gw]}\n")
     u = aprbs_input(3000, seed=9)
     np.testing.assert_allclose(simulate(patched, u), simulate(diagram_from_text(hand), u), rtol=1e-10, atol=1e-10)
-    assert Backlash(fractions=(0.1, 0.5)).options(TWO, Place("dphi", "spring_angle", via="MC"),
+    assert DeadZone(fractions=(0.1, 0.5)).options(TWO, Place("dphi", "spring_angle", via="MC"),
                                                   Scales({"dphi": 0.02})) == (0.002, 0.01)
 
 
-def test_spring_curve_keeps_the_spring_signal_name_and_adds_an_odd_curve():
-    patched = SpringCurve().patch(TWO, _place(spring_angles(TWO), "dphi"), 0.01)
+def test_backlash_keeps_the_spring_signal_name_and_adds_an_odd_curve():
+    patched = Backlash().patch(TWO, _place(spring_angles(TWO), "dphi"), 0.01)
     mc = patched.block("MC")
-    assert mc.kind == "sum" and {t.signal for t in mc.inputs} == {"MC_lin", "sc_dphi"}
+    assert mc.kind == "sum" and {t.signal for t in mc.inputs} == {"MC_lin", "bl_dphi"}
     assert patched.block("MC_lin").k == TWO.block("MC").k
-    curve = patched.block("sc_dphi")
+    curve = patched.block("bl_dphi")
     assert curve.bias is False and set(curve.weights.v) == {0.0}
 
 
@@ -212,7 +212,7 @@ def test_damping_starts_at_its_lower_bound_zero():
 
 
 def test_the_registry_names_and_selection():
-    assert set(BUILTIN_EFFECTS) == {"friction", "damping", "dead_time", "saturation", "backlash", "spring_curve",
+    assert set(BUILTIN_EFFECTS) == {"friction", "damping", "dead_time", "saturation", "backlash", "dead_zone",
                                     "cogging"}
     assert [e.name for e in select_effects(["dead_time", " friction"], BUILTIN_EFFECTS)] == ["dead_time", "friction"]
     with pytest.raises(SdnnError, match="did you mean 'friction'"):

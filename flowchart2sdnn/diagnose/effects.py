@@ -21,8 +21,8 @@ friction       speed               nonlinear curve of the speed (tanh neurons wi
 damping        speed, speed diff.  viscous gain with a new parameter (0) in the torque sum(s)
 dead_time      input               a delay of n samples in front of every consumer of the input
 saturation     input               L*sat((u - o)/L) + o: a hard clip at o -/+ L, L scanned in the data range
-backlash       spring angle        c*x becomes c*(x - g*sat(x/g)): a dead zone of half gap g (scanned)
-spring_curve   spring angle        c*x becomes c*x + an odd learned curve (v = 0) of x
+backlash       spring angle        c*x becomes c*x + an odd learned curve (v = 0) of x (a dead zone is learnable)
+dead_zone      spring angle        c*x becomes c*(x - g*sat(x/g)): exact backlash of half gap g (scanned)
 cogging        speed               phi = integral(speed); A sin(p phi) + B cos(p phi) (A = B = 0) in the sum
 =============  ==================  =====================================================================
 """
@@ -56,7 +56,7 @@ __all__ = [
     "DeadTime",
     "Saturation",
     "Backlash",
-    "SpringCurve",
+    "DeadZone",
     "Cogging",
     "BUILTIN_EFFECTS",
     "builtin_effects",
@@ -265,8 +265,8 @@ class Saturation:
 
 
 @dataclass(frozen=True)
-class Backlash:
-    """A dead zone in the shaft: the spring torque ``c x`` becomes ``c (x - g sat(x / g))``, g the half gap.
+class DeadZone:
+    """Exact backlash, a dead zone in the shaft: the spring torque ``c x`` becomes ``c (x - g sat(x / g))``, g the half gap.
 
     Inside ``|x| < g`` the shaft transmits nothing; outside it acts as before, shifted by the gap. At g = 0
     the patch is neutral but the clip is undefined, so g is scanned as fractions of the angle's RMS (like a
@@ -274,7 +274,7 @@ class Backlash:
     """
 
     fractions: tuple[float, ...] = (0.05, 0.1, 0.2, 0.35, 0.5)
-    name: str = "backlash"
+    name: str = "dead_zone"
     neutral: bool = False
     extra_dof: int = 0
 
@@ -295,7 +295,7 @@ class Backlash:
             taken.add(n)
             return n
 
-        g, clip, width, inside = new(f"{x}_gap"), new(f"bl_{x}_clip"), new(f"bl_{x}_g"), new(f"bl_{x}")
+        g, clip, width, inside = new(f"{x}_gap"), new(f"dz_{x}_clip"), new(f"dz_{x}_g"), new(f"dz_{x}")
         unit = next((b.unit for b in diagram.blocks if b.name == x), None)
         param = Parameter(g, gap, unit=unit, min=0.0, description=f"half gap of the backlash in {x} (diagnose)")
         blocks = [
@@ -310,19 +310,19 @@ class Backlash:
             if b.name == spring.name else b for b in patched.blocks))
 
     def describe(self) -> str:
-        return "backlash: a dead zone of learned width in the shaft angle before the spring"
+        return "dead_zone: a hard gap of learned width in the shaft angle before the spring (exact backlash)"
 
     def label(self, option) -> str:
         return f"gap={float(option):.3g}"
 
 
 @dataclass(frozen=True)
-class SpringCurve:
-    """The spring torque ``c x`` becomes ``c x + sum v_i tanh(a_i x)`` (odd, v = 0): a learned stiffness curve
-    (hardening, softening, or a smooth backlash)."""
+class Backlash:
+    """Backlash as the issue defines it: the spring torque ``c x`` becomes ``c x + sum v_i tanh(a_i x)`` (odd,
+    v = 0 at the start), a learned curve that can form a dead zone (or a hardening or softening spring)."""
 
     slopes: tuple[float, ...] = (20.0, 5.0, 1.5)
-    name: str = "spring_curve"
+    name: str = "backlash"
     neutral: bool = True
     extra_dof: int = 0
 
@@ -336,20 +336,20 @@ class SpringCurve:
         scale = float(option) if option else 1.0
         spring = diagram.block(place.via)
         lin = fresh_name(diagram, f"{spring.name}_lin")
-        curve = fresh_name(diagram, f"sc_{place.at}", {lin})
-        block = _curve(curve, place.at, self.slopes, scale, False, f"spring curve of {place.at} (diagnose)")
+        curve = fresh_name(diagram, f"bl_{place.at}", {lin})
+        block = _curve(curve, place.at, self.slopes, scale, False, f"backlash of {place.at} (diagnose)")
         blocks = []
         for b in diagram.blocks:
             if b.name == spring.name:
                 blocks.append(replace(b, name=lin))
                 blocks.append(Block(spring.name, "sum", (Term(lin), Term(curve)), unit=spring.unit,
-                                    description="spring torque with a learned curve (diagnose)"))
+                                    description="spring torque with backlash (diagnose)"))
             else:
                 blocks.append(b)
         return add_blocks(replace(diagram, blocks=tuple(blocks)), [block])
 
     def describe(self) -> str:
-        return "spring_curve: the spring torque becomes c*x plus a learned odd curve of the shaft angle"
+        return "backlash: the spring torque becomes c*x plus a learned odd curve of the shaft angle"
 
     def label(self, option) -> str:
         return ""
@@ -405,7 +405,7 @@ class Cogging:
 
 # ------------------------------------------------------------------------------------------------ registry
 BUILTIN_EFFECTS: dict[str, Effect] = {
-    e.name: e for e in (Friction(), Damping(), DeadTime(), Saturation(), Backlash(), SpringCurve(), Cogging())
+    e.name: e for e in (Friction(), Damping(), DeadTime(), Saturation(), Backlash(), DeadZone(), Cogging())
 }
 
 
