@@ -107,9 +107,12 @@ def test_cli_writes_the_augmented_chart_and_the_report(files):
     digest = hashlib.sha256(src.read_bytes()).hexdigest()
     out, rep = files / "aug.yaml", files / "rep.json"
     args = ["diagnose", str(files / "train.csv"), "--diagram", str(src), "--validate", str(files / "val.csv"),
-            "-o", str(out), "--report", str(rep), "--effects", "friction,damping", "--rounds", "1"]
+            "-o", str(out), "--report", str(rep), "--effects", "friction,damping", "--rounds", "1",
+            "--plots", str(files / "plots")]
     res = CliRunner().invoke(main, args)
     assert res.exit_code == 0, res.output
+    for png in ("residual_friction_v.png", "whiteness.png"):
+        assert (files / "plots" / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "accepted: friction at v" in res.output and "final chart:" in res.output
     report = json.loads(rep.read_text())
     assert report["accepted"][0]["effect"] == "friction" and report["command"]["validate"]

@@ -162,7 +162,12 @@ def _effects(unit: FileUnit) -> str:
         accepted = found.report.get("accepted") or []
     except Exception as exc:  # noqa: BLE001 - the identification row stands; say why diagnosis failed
         return f"diagnose failed: {_message(exc)}"
-    return "; ".join(str(a.get("label") or f"{a.get('effect')}@{a.get('at')}") for a in accepted) or "none"
+    def name(a: dict) -> str:
+        text = f"{a.get('effect')}@{a.get('at')}"
+        label = a.get("label")  # the chosen option, e.g. "n=6" for a dead time
+        return f"{text} ({label})" if label else text
+
+    return "; ".join(name(a) for a in accepted) or "none"
 
 
 def identify_file(unit: FileUnit) -> dict:

@@ -5,22 +5,28 @@ the score test of every candidate (:mod:`.score`) -> brief refits and acceptance
 report (:mod:`.report`); the click command lives in :mod:`.cli`.
 """
 
-from .effects import (
-    BUILTIN_EFFECTS,
-    Backlash,
-    Cogging,
-    Damping,
-    DeadTime,
-    DeadZone,
-    Effect,
-    Friction,
-    Saturation,
-    Scales,
-)
-from .graph import Place
-from .loop import DiagnoseSettings, Diagnosis, Fitted, diagnose
-from .score import Candidate, Score, Screen, gauss_newton_decrease, screen
-from .usereffects import YamlEffect, load_effects_file
+from __future__ import annotations
+
+import importlib
+
+# Importing this package is cheap: a name loads its module on first use, so `sdnn --help` (which imports
+# diagnose.cli to register the command) does not pay for numba and scipy.
+_WHERE = {
+    **dict.fromkeys(("BUILTIN_EFFECTS", "Backlash", "Cogging", "Damping", "DeadTime", "DeadZone", "Effect",
+                     "Friction", "Saturation", "Scales"), "effects"),
+    "Place": "graph",
+    **dict.fromkeys(("DiagnoseSettings", "Diagnosis", "Fitted", "diagnose"), "loop"),
+    **dict.fromkeys(("Candidate", "Score", "Screen", "gauss_newton_decrease", "screen"), "score"),
+    **dict.fromkeys(("YamlEffect", "load_effects_file"), "usereffects"),
+}
+
+
+def __getattr__(name: str):
+    module = _WHERE.get(name)
+    if module is None:
+        raise AttributeError(f"module {__name__!r} has no attribute {name!r}")
+    return getattr(importlib.import_module(f".{module}", __name__), name)
+
 
 __all__ = [
     "BUILTIN_EFFECTS",

@@ -8,8 +8,10 @@ One round:
    each twice - from the current fit with the effect added at neutral values, and from the chart as given
    with every accepted effect and this one added at neutral values (a refit only from the previous fit gets
    stuck where the previous fit bent its parameters to imitate the missing effect) - keeping the better;
-4. the refitted candidates are ranked by the information criterion; the first whose validation RMS falls
-   (by at least ``min_gain``) and whose criterion falls is accepted and polished (``max_iter`` iterations);
+4. the refitted candidates are ranked by validation RMS (those within ``min_gain / 2`` of the best by the
+   information criterion, so that the simpler of two equally good effects wins); the first whose validation
+   RMS falls (by at least ``min_gain``) and whose criterion falls is accepted and polished (``max_iter``
+   iterations);
 5. repeat until nothing is significant, nothing is accepted, or ``rounds`` rounds are done.
 
 AIC = N ln(SSE/N) + 2k and BIC = N ln(SSE/N) + k ln N on the training record, N the number of residuals, k
@@ -236,6 +238,18 @@ def _refit_set(scr: Screen, settings: DiagnoseSettings) -> list[Score]:
     return best
 
 
+def _order(refits: list[tuple[Score, Fitted]], settings: DiagnoseSettings) -> list[tuple[Score, Fitted]]:
+    """Refitted candidates best first: by validation RMS, where those within half of `min_gain` of the best
+    count as tied and go by the information criterion (the simpler of two equally good effects first)."""
+    if not refits:
+        return refits
+    by_val = sorted(refits, key=lambda sf: sf[1].validation_rms)
+    tol = by_val[0][1].validation_rms * (1 + settings.min_gain / 2)
+    tied = [sf for sf in by_val if sf[1].validation_rms <= tol]
+    rest = [sf for sf in by_val if sf[1].validation_rms > tol]
+    return sorted(tied, key=lambda sf: sf[1].criterion(settings.criterion)) + rest
+
+
 def _repeatable(effect: Effect) -> bool:
     return bool(getattr(effect, "repeatable", effect.name == "cogging"))
 
@@ -334,7 +348,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
         if not best:
             stop_reason = "nothing_significant"
             break
-        refits.sort(key=lambda sf: sf[1].criterion(settings.criterion))
+        refits = _order(refits, settings)
         choice, reason = None, "no refit succeeded"
         for s, f in refits:
             ok_val = f.validation_rms < current.validation_rms * (1 - settings.min_gain)
@@ -356,8 +370,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
         extra_dof += c.effect.extra_dof
         polished = _fit(f.diagram, train, records, settings, settings.max_iter, extra_dof, f.start, None,
                         f.accepted)
-        if not polished.cost <= f.cost:
-            polished = f
+        if not (polished.cost <= f.cost and polished.validation_rms <= f.validation_rms):
+            polished = f  # the brief refit validates better: stop early there
         rounds.append(_round_entry(r, s, current, polished, True, "validation RMS and "
                                    f"{settings.criterion.upper()} fell", settings))
         accepted.append({"effect": c.name, "at": c.at, "option": s.as_dict()["option"], "label": c.label})

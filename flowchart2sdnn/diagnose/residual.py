@@ -81,7 +81,7 @@ def whiteness(residual: np.ndarray, inputs: np.ndarray, output_names: Sequence[s
         ``{"bound", "level", "n", "autocorrelation": {output: summary}, "cross_correlation":
         {output: {input: summary}}, "white": bool, "independent": bool}``; a summary holds the lags, r, how
         many lags fall outside the band, the largest |r| and its lag. ``white`` (``independent``) is True when
-        at most 1 % of the lags (but at least none) of every output fall outside.
+        no more than 1 % of the lags (rounded down: for 25 or 51 lags, none) of any output fall outside.
     """
     e = np.atleast_2d(np.asarray(residual, dtype=float).T).T
     u = np.atleast_2d(np.asarray(inputs, dtype=float).T).T

@@ -1,0 +1,138 @@
+"""`sdnn diagnose` on real measurements: EMPS and the UWaterloo flexible drive (the numbers of docs/diagnose.md).
+
+EMPS (../shared/data/real/emps): the chart is a mass with viscous friction only
+(tests/data/diagnose/emps_mass.yaml). diagnose runs on train.csv with its last 30 % as validation; the chart
+as given and the augmented chart are then refitted on the whole train.csv and simulated on the official test
+record (test.csv, the pulses record) from the force alone, the initial position and speed taken from a
+quadratic fit to the first 20 samples; the score is the RMSE of samples 20.. in mm (the benchmark protocol).
+The learned friction curve plus the viscous term is least-squares fitted by Fv*v + Fc*sign(v) + offset (and
+per direction) over the speed range of the data, to compare with the published IDIM-LS values.
+
+UWaterloo MTE 360 flexible drive: the chart without Coulomb friction (diagrams/real/flexible_drive_linear.yaml),
+trained on square_2V, validated on square_1p5V; fit % before and after on every record of the folder.
+
+Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/real_diagnose.py [emps] [flexible]``.
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from flowchart2sdnn.alignment import run_aligned
+from flowchart2sdnn.compiler import compile_diagram
+from flowchart2sdnn.data.csvdata import read_csv
+from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
+from flowchart2sdnn.diagram.validate import load_diagram
+from flowchart2sdnn.identify.problem import metrics
+from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.network.runtime import CompiledNetwork
+
+ROOT = Path(__file__).resolve().parents[1]
+REAL = ROOT.parent / "shared" / "data" / "real"
+PUBLISHED = {"M": 95.1089, "Fv": 203.5034, "Fc": 20.3935, "offset": -3.1648}
+
+
+def initial_state(time_s: np.ndarray, q: np.ndarray, n: int = 20) -> tuple[float, float]:
+    """(q0, v0) at the first sample from a quadratic fit to the first n samples."""
+    c = np.polyfit(time_s[:n] - time_s[0], q[:n], 2)
+    return float(c[2]), float(c[1])
+
+
+def emps_test_rmse_mm(diagram, test) -> float:
+    """Free-run simulation RMSE on the test record, samples 20.., in mm (initial state from the first 20)."""
+    q, force = test.columns["q"], test.columns["F"]
+    q0, v0 = initial_state(test.time, q)
+    chart = dataclasses.replace(diagram, blocks=tuple(
+        dataclasses.replace(b, init=v0) if b.name == "v" else b for b in diagram.blocks))
+    compiled = CompiledNetwork(compile_diagram(chart).network)
+    y = run_aligned(compiled, compiled.theta0(), force[:, None], "zoh", {"q": q0})[:, 0]
+    return 1000.0 * float(np.sqrt(np.mean((q[20:] - y[20:]) ** 2)))
+
+
+def friction_coefficients(result: dict, speed_max: float) -> dict:
+    """Fv, Fc, offset of the identified friction (viscous gain + learned curve), symmetric and per direction."""
+    p = {k: v["value"] for k, v in result["parameters"].items()}
+    v = np.concatenate([-np.linspace(0.05, 1, 200), np.linspace(0.05, 1, 200)]) * speed_max
+    force = p.get("Fv", 0.0) * v
+    for w in result["nonlinear"].values():
+        a, vv = np.asarray(w["a"]), np.asarray(w["v"])
+        b = np.asarray(w.get("b") or np.zeros_like(a))
+        force = force + np.tanh(np.outer(v, a) + b) @ vv
+    sym = np.linalg.lstsq(np.column_stack([v, np.sign(v), np.ones_like(v)]), force, rcond=None)[0]
+    out = {"M": p["M"], "Fv": sym[0], "Fc": sym[1], "offset": sym[2]}
+    for side, mask in (("+", v > 0), ("-", v < 0)):
+        c = np.linalg.lstsq(np.column_stack([v[mask], np.ones(mask.sum())]), force[mask], rcond=None)[0]
+        out["Fv" + side], out["Fc" + side] = c[0], abs(c[1])
+    return out
+
+
+def emps(rounds: int = 3) -> None:
+    folder = REAL / "emps"
+    maps = {"F": "force_N", "q": "q_meas_m"}
+    train = read_csv(folder / "train.csv", ["F", "q"], maps, 0.001)
+    test = read_csv(folder / "test.csv", ["F", "q"], maps, 0.001)
+    t0 = time.perf_counter()
+    d = diagnose(load_diagram(ROOT / "tests" / "data" / "diagnose" / "emps_mass.yaml"), train, (),
+                 DiagnoseSettings(rounds=rounds))
+    print(f"EMPS diagnose --rounds {rounds}: {time.perf_counter() - t0:.0f} s; accepted: "
+          + ", ".join(f"{a['effect']} at {a['at']}" + (f" ({a['label']})" if a["label"] else "")
+                      for a in d.report["accepted"]))
+    for r in d.report["rounds"]:
+        print(f"  round {r['round']} {r['effect']} at {r['at']}: accepted {r['accepted']}, validation RMS "
+              f"{1000 * r['validation_rms_before']:.2f} -> {1000 * (r['validation_rms_after'] or np.nan):.2f} mm")
+    speed = float(np.max(np.abs(np.diff(train.columns["q"]) / 0.001)))
+    for name, fitted in (("chart as given", d.nominal), ("after diagnose", d.final)):
+        full = identify(fitted.diagram, train, None, IdentifySettings(max_iter=150))
+        val_mm = 1000 * fitted.validation_rms
+        print(f"  {name}: validation (last 30 % of train) {val_mm:.2f} mm; refitted on all of train: "
+              f"test RMSE {emps_test_rmse_mm(full.diagram, test):.2f} mm "
+              f"(without refit {emps_test_rmse_mm(fitted.diagram, test):.2f} mm)")
+        if full.result["nonlinear"]:
+            c = friction_coefficients(full.result, speed)
+            print("    " + ", ".join(f"{k} = {v:.4g}" for k, v in c.items()))
+        else:
+            print("    " + ", ".join(f"{k} = {v['value']:.4g}" for k, v in full.result["parameters"].items()))
+    print("  published (IDIM-LS): " + ", ".join(f"{k} = {v}" for k, v in PUBLISHED.items()))
+
+
+def flexible() -> None:
+    folder = REAL / "uwaterloo_mte360_flexible_drive"
+    maps = {"u": "u_V", "v1": "v1_cart1_mm_s", "v2": "v2_cart2_mm_s"}
+    cols = ["u", "v1", "v2"]
+    read = {p.stem: read_csv(p, cols, maps, 0.001) for p in sorted(folder.glob("*.csv"))}
+    t0 = time.perf_counter()
+    d = diagnose(load_diagram(ROOT / "diagrams" / "real" / "flexible_drive_linear.yaml"), read["square_2V"],
+                 [read["square_1p5V"]], DiagnoseSettings(rounds=3))
+    print(f"flexible drive diagnose: {time.perf_counter() - t0:.0f} s; accepted: "
+          + ", ".join(f"{a['effect']} at {a['at']}" for a in d.report["accepted"]))
+    for name, w in d.report["final"]["nonlinear"].items():
+        a, v = np.asarray(w["a"]), np.asarray(w["v"])
+        b = np.asarray(w.get("b") or np.zeros_like(a))
+        at = np.array([-100.0, -50.0, -10.0, 10.0, 50.0, 100.0])
+        curve = np.tanh(np.outer(at, a) + b) @ v
+        print(f"  {name} [V] at " + ", ".join(f"{s:g}" for s in at) + " mm/s: " + ", ".join(f"{x:.3f}" for x in curve))
+    print("  | record | v1 before | v1 after | v2 before | v2 after |")
+    print("  |---|---|---|---|---|")
+    for stem, ds in read.items():
+        row = []
+        for fitted in (d.nominal, d.final):
+            m = metrics(fitted.identification.problem.compiled, fitted.identification.x, ds, "zoh")
+            row.append(m["fit_percent"])
+        mark = "*" if stem == "square_2V" else ""
+        print(f"  | {stem}{mark} | {row[0]['v1']:.1f} | {row[1]['v1']:.1f} | {row[0]['v2']:.1f} | {row[1]['v2']:.1f} |")
+
+
+if __name__ == "__main__":
+    which = sys.argv[1:] or ["emps", "flexible"]
+    if not REAL.is_dir():
+        sys.exit(f"{REAL} is absent")
+    if "emps" in which:
+        emps(3)
+        emps(1)
+    if "flexible" in which:
+        flexible()

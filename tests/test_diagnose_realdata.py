@@ -1,0 +1,70 @@
+"""`sdnn diagnose` on real measurements (issue 5): EMPS and the UWaterloo flexible drive.
+
+Reads ../shared/data/real in place (skips when it is absent); slow. Oracles: the published EMPS parameters
+(Janot, Gautier, Brunot 2019) and the RMSE/fit % recomputed here from their definitions.
+"""
+
+from __future__ import annotations
+
+import importlib.util
+import math
+
+import numpy as np
+import pytest
+from diagnose_bench import DATA, REAL
+
+from flowchart2sdnn.data.csvdata import read_csv
+from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
+from flowchart2sdnn.diagram.validate import load_diagram
+from flowchart2sdnn.identify.run import IdentifySettings, identify
+
+pytestmark = [pytest.mark.slow, pytest.mark.realdata,
+              pytest.mark.skipif(not REAL.is_dir(), reason="../shared/data/real is absent")]
+
+_spec = importlib.util.spec_from_file_location("real_diagnose", DATA.parents[2] / "benchmarks" / "real_diagnose.py")
+real = importlib.util.module_from_spec(_spec)
+_spec.loader.exec_module(real)
+
+
+def test_emps_friction_is_found_on_the_velocity_and_the_test_error_falls():
+    maps = {"F": "force_N", "q": "q_meas_m"}
+    train = read_csv(REAL / "emps" / "train.csv", ["F", "q"], maps, 0.001)
+    test = read_csv(REAL / "emps" / "test.csv", ["F", "q"], maps, 0.001)
+    d = diagnose(load_diagram(DATA / "emps_mass.yaml"), train, (), DiagnoseSettings(rounds=1))
+    assert d.report["accepted"][0]["effect"] == "friction" and d.report["accepted"][0]["at"] == "v"
+    first = d.report["rounds"][0]
+    assert first["validation_rms_after"] < first["validation_rms_before"] / 10
+    before = identify(d.nominal.diagram, train, None, IdentifySettings(max_iter=150))
+    after = identify(d.final.diagram, train, None, IdentifySettings(max_iter=150))
+    rmse_before = real.emps_test_rmse_mm(before.diagram, test)
+    rmse_after = real.emps_test_rmse_mm(after.diagram, test)
+    assert rmse_after < rmse_before / 5 and rmse_after < 12.0
+    c = real.friction_coefficients(after.result, 0.12)
+    assert c["M"] == pytest.approx(95.11, rel=0.05)
+    assert c["Fc"] == pytest.approx(20.39, rel=0.35) and c["offset"] < 0
+    assert 100 < c["Fv"] < 260
+
+
+def test_emps_initial_state_from_the_first_20_samples():
+    t = np.arange(20) * 0.001
+    q = 0.002 + 0.01 * t + 0.5 * 3.0 * t**2
+    q0, v0 = real.initial_state(t, q)
+    assert q0 == pytest.approx(0.002, abs=1e-12) and v0 == pytest.approx(0.01, rel=1e-9)
+
+
+def test_flexible_drive_friction_is_found_and_validation_fit_rises():
+    folder = REAL / "uwaterloo_mte360_flexible_drive"
+    maps = {"u": "u_V", "v1": "v1_cart1_mm_s", "v2": "v2_cart2_mm_s"}
+    train = read_csv(folder / "square_2V.csv", ["u", "v1", "v2"], maps, 0.001)
+    val = read_csv(folder / "square_1p5V.csv", ["u", "v1", "v2"], maps, 0.001)
+    d = diagnose(load_diagram(DATA.parents[2] / "diagrams" / "real" / "flexible_drive_linear.yaml"), train, [val],
+                 DiagnoseSettings(rounds=2))
+    assert d.report["accepted"][0]["effect"] == "friction"
+    fit = d.report["after"]["validation_fit_percent"][0]
+    before = d.report["before"]["validation_fit_percent"][0]
+    y = val.columns["v1"][1:]
+    # fit % from its definition, on the final chart's validation residual
+    rms = d.report["after"]["validation_rms_per_output"][0]["v1"]
+    by_hand = 100 * (1 - math.sqrt(len(y)) * rms / np.linalg.norm(y - y.mean()))
+    assert fit["v1"] == pytest.approx(by_hand, abs=1e-6)
+    assert fit["v1"] > before["v1"] + 8 and fit["v2"] > before["v2"] + 8
