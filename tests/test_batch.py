@@ -267,20 +267,24 @@ def test_diagnose_column_and_report_section(fleet, tmp_path, monkeypatch):
 
     def fake(diagram, data, validation=(), settings=None, **kwargs):
         late = "B_day" in data.path and not data.path.endswith("day000.csv")
-        return Found([{"effect": "friction", "at": "w1", "label": "friction at w1"}] if late else [])
+        # the shape diagnose() reports: label is the chosen option's text ("" for friction, "n=6" for a dead time)
+        return Found([{"effect": "friction", "at": "w1", "label": ""},
+                      {"effect": "dead_time", "at": "M1", "label": "n=6"}] if late else [])
 
     monkeypatch.setattr(loop, "diagnose", fake)
     out = tmp_path / "r.csv"
     settings = BatchSettings(identify=FAST.identify, diagnose=True)
     run_batch(fleet["diagram"], fleet["files"], str(out), settings)
     rows = {Path(r["file"]).name: r for r in read_results(out)[1]}
-    assert rows["B_day002.csv"]["effects"] == "friction at w1" and rows["A_day002.csv"]["effects"] == "none"
+    assert rows["B_day002.csv"]["effects"] == "friction@w1; dead_time@M1 (n=6)"
+    assert rows["A_day002.csv"]["effects"] == "none"
     with pytest.raises(SdnnError, match="BATCH002"):  # a table without the column is another configuration
         run_batch(fleet["diagram"], fleet["files"], str(out), FAST)
     from flowchart2sdnn.batch.report import effects_table
 
     effects = effects_table(load_fleet(out))
-    assert effects == [{"drive": "B", "effect": "friction at w1", "days": ["1", "2"], "of": 3, "first_day": "1"}]
+    assert effects == [{"drive": "B", "effect": "friction@w1", "days": ["1", "2"], "of": 3, "first_day": "1"},
+                       {"drive": "B", "effect": "dead_time@M1 (n=6)", "days": ["1", "2"], "of": 3, "first_day": "1"}]
 
 
 @pytest.mark.slow

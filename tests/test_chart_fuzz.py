@@ -73,7 +73,7 @@ def test_any_gain_expression_compiles_or_fails_cleanly(case_path, k):
     doc["blocks"]["acc1"]["k"] = k
     out = _check(yaml.safe_dump(doc, sort_keys=False, allow_unicode=True).encode("utf-8"), case_path)
     if out.status == "error":
-        assert out.code.startswith(("CHART", "LINT", "COMPILE", "YAML")), out
+        assert out.code.startswith(("CHART", "LINT", "COMPILE", "YAML", "identify:FIT")), out
 
 
 def test_the_generator_reaches_the_compiler(case_path):
