@@ -4,6 +4,7 @@ from __future__ import annotations
 
 import json
 import math
+import sys
 from dataclasses import replace
 
 import click
@@ -160,3 +161,6 @@ def register(main: click.Group) -> None:
             click.echo(format_report(report), nl=False)
             for path in [p for p in (output, report_path) if p] + [str(w) for w in written]:
                 click.echo(f"wrote {path}")
+        if report.get("interrupted"):
+            click.echo("interrupted: the chart and report hold what was accepted before Ctrl-C", err=True)
+            sys.exit(1)

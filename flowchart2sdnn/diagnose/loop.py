@@ -276,6 +276,11 @@ def _split(train: list[Dataset], validation: Sequence[Dataset], split: float | N
     return [train.slice(0, n)], [(train, n)], split
 
 
+def _was_interrupted(fitted) -> bool:
+    """The trainer turns Ctrl-C into an 'interrupted' result; diagnose must stop there too."""
+    return fitted is not None and fitted.identification.result.get("status") == "interrupted"
+
+
 def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: Sequence[Dataset] = (),
              settings: DiagnoseSettings = DiagnoseSettings(), effects: Sequence[Effect] | None = None,
              progress: Progress | None = None) -> Diagnosis:
@@ -315,77 +320,93 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
     rounds, candidates_out, accepted, screens = [], [], [], []
     done: set = set()
     stop_reason = "rounds"
+    interrupted = _was_interrupted(nominal)
     timing = {"nominal_fit": time.perf_counter() - t_start, "screen": [], "refit": []}
-    for r in range(1, settings.rounds + 1):
-        problem = _current_problem(current, train, settings)
-        cands = _candidates(effects, current.diagram, _scales(problem), done)
-        if not cands:
-            stop_reason = "no_candidates"
-            break
-        say(f"round {r}: score test of {len(cands)} candidates", None)
-        scr = screen(cands, problem, train, settings.alignment, settings.seed, settings.top_options, say)
-        screens.append(scr)
-        timing["screen"].append(scr.seconds)
-        best = _refit_set(scr, settings)
-        refits: list[tuple[Score, Fitted]] = []
-        for i, s in enumerate(best):
-            t0 = time.perf_counter()
-            say(f"round {r}: refit {s.candidate.title()} ({i + 1}/{len(best)})", None)
-            fitted = _refit(s.candidate, nominal_chart, train, records, settings, extra_dof, accepted)
-            timing["refit"].append(time.perf_counter() - t0)
-            if fitted is not None:
-                refits.append((s, fitted))
-        achieved = {id(s): f for s, f in refits}
-        for rank, s in enumerate(scr.scores):
-            entry = {"round": r, "rank": rank + 1, **s.as_dict()}
-            f = achieved.get(id(s))
-            if f is not None:
-                entry.update({"refitted": True, "achieved_cost": _num(f.cost),
-                              "achieved_decrease": _num(current.cost - f.cost), "start": f.start,
-                              "validation_rms_after": _num(f.validation_rms),
-                              settings.criterion + "_after": _num(f.criterion(settings.criterion))})
-            candidates_out.append(entry)
-        if not best:
-            stop_reason = "nothing_significant"
-            break
-        refits = _order(refits, settings)
-        choice, reason = None, "no refit succeeded"
-        for s, f in refits:
-            ok_val = f.validation_rms < current.validation_rms * (1 - settings.min_gain)
-            ok_crit = f.criterion(settings.criterion) < current.criterion(settings.criterion)
-            if ok_val and ok_crit:
-                choice = (s, f)
+    try:
+        if interrupted:
+            raise KeyboardInterrupt
+        for r in range(1, settings.rounds + 1):
+            problem = _current_problem(current, train, settings)
+            cands = _candidates(effects, current.diagram, _scales(problem), done)
+            if not cands:
+                stop_reason = "no_candidates"
                 break
-            if choice is None and reason == "no refit succeeded":
-                reason = (f"{s.candidate.title()}: " + ("validation RMS did not fall enough" if not ok_val else
-                          f"{settings.criterion.upper()} did not fall"))
-        if choice is None:
-            s, f = refits[0] if refits else (best[0], None)
-            rounds.append(_round_entry(r, s, current, f, False, reason, settings))
-            stop_reason = "nothing_accepted"
-            break
-        s, f = choice
-        c = s.candidate
-        say(f"round {r}: accepted {c.title()}; polishing", None)
-        extra_dof += c.effect.extra_dof
-        polished = _fit(f.diagram, train, records, settings, settings.max_iter, extra_dof, f.start, None,
-                        f.accepted)
-        if not (polished.cost <= f.cost and polished.validation_rms <= f.validation_rms):
-            polished = f  # the brief refit validates better: stop early there
-        rounds.append(_round_entry(r, s, current, polished, True, "validation RMS and "
-                                   f"{settings.criterion.upper()} fell", settings))
-        accepted.append({"effect": c.name, "at": c.at, "option": s.as_dict()["option"], "label": c.label})
-        done.add(_done_key(c))
-        nominal_chart = c.effect.patch(nominal_chart, c.place, c.option)
-        current = polished
-    else:
-        stop_reason = "rounds"
+            say(f"round {r}: score test of {len(cands)} candidates", None)
+            scr = screen(cands, problem, train, settings.alignment, settings.seed, settings.top_options, say)
+            screens.append(scr)
+            timing["screen"].append(scr.seconds)
+            best = _refit_set(scr, settings)
+            refits: list[tuple[Score, Fitted]] = []
+            for i, s in enumerate(best):
+                t0 = time.perf_counter()
+                say(f"round {r}: refit {s.candidate.title()} ({i + 1}/{len(best)})", None)
+                fitted = _refit(s.candidate, nominal_chart, train, records, settings, extra_dof, accepted)
+                timing["refit"].append(time.perf_counter() - t0)
+                if _was_interrupted(fitted):
+                    raise KeyboardInterrupt
+                if fitted is not None:
+                    refits.append((s, fitted))
+            achieved = {id(s): f for s, f in refits}
+            for rank, s in enumerate(scr.scores):
+                entry = {"round": r, "rank": rank + 1, **s.as_dict()}
+                f = achieved.get(id(s))
+                if f is not None:
+                    entry.update({"refitted": True, "achieved_cost": _num(f.cost),
+                                  "achieved_decrease": _num(current.cost - f.cost), "start": f.start,
+                                  "validation_rms_after": _num(f.validation_rms),
+                                  settings.criterion + "_after": _num(f.criterion(settings.criterion))})
+                candidates_out.append(entry)
+            if not best:
+                stop_reason = "nothing_significant"
+                break
+            refits = _order(refits, settings)
+            choice, reason = None, "no refit succeeded"
+            for s, f in refits:
+                ok_val = f.validation_rms < current.validation_rms * (1 - settings.min_gain)
+                ok_crit = f.criterion(settings.criterion) < current.criterion(settings.criterion)
+                if ok_val and ok_crit:
+                    choice = (s, f)
+                    break
+                if choice is None and reason == "no refit succeeded":
+                    reason = (f"{s.candidate.title()}: " + ("validation RMS did not fall enough" if not ok_val else
+                              f"{settings.criterion.upper()} did not fall"))
+            if choice is None:
+                s, f = refits[0] if refits else (best[0], None)
+                rounds.append(_round_entry(r, s, current, f, False, reason, settings))
+                stop_reason = "nothing_accepted"
+                break
+            s, f = choice
+            c = s.candidate
+            say(f"round {r}: accepted {c.title()}; polishing", None)
+            extra_dof += c.effect.extra_dof
+            polished = _fit(f.diagram, train, records, settings, settings.max_iter, extra_dof, f.start, None,
+                            f.accepted)
+            stop_now = _was_interrupted(polished)
+            if stop_now or not (polished.cost <= f.cost and polished.validation_rms <= f.validation_rms):
+                polished = f  # the brief refit validates better: stop early there
+            rounds.append(_round_entry(r, s, current, polished, True, "validation RMS and "
+                                       f"{settings.criterion.upper()} fell", settings))
+            accepted.append({"effect": c.name, "at": c.at, "option": s.as_dict()["option"], "label": c.label})
+            done.add(_done_key(c))
+            nominal_chart = c.effect.patch(nominal_chart, c.place, c.option)
+            current = polished
+            if stop_now:
+                raise KeyboardInterrupt
+        else:
+            stop_reason = "rounds"
+    except (KeyboardInterrupt, SystemError) as exc:
+        # Ctrl-C (inside a numba kernel it surfaces as a SystemError caused by it): keep the last accepted chart
+        # and report what was done; the CLI writes it marked interrupted
+        if isinstance(exc, SystemError) and not isinstance(exc.__cause__ or exc.__context__, KeyboardInterrupt):
+            raise
+        stop_reason, interrupted = "interrupted", True
 
     say("residual analysis", None)
     report = {
         "format": REPORT_FORMAT,
         "version": REPORT_VERSION,
         "stop": stop_reason,
+        "interrupted": interrupted,
         "candidates": candidates_out,
         "rounds": rounds,
         "accepted": accepted,
