@@ -50,6 +50,7 @@ import numba
 import numpy as np
 
 from ..diagram.expr import BinOp, Neg, Num, Var
+from .kernels import _slope, _transfer  # one definition of the transfer functions for both kernels
 from .runtime import CompiledNetwork
 
 __all__ = [
@@ -361,32 +362,6 @@ def new_state(u0: np.ndarray, n_connections: int, n_slots: int, history: np.ndar
 
 
 # ------------------------------------------------------------------------------------------ network steps
-@numba.njit(cache=True, inline="always")
-def _transfer(code, n):
-    if code == 0:
-        return n
-    if code == 1:
-        return math.tanh(n)
-    if code == 2:
-        return math.sin(n)
-    if code == 4:
-        return min(1.0, max(-1.0, n))
-    return math.cos(n)
-
-
-@numba.njit(cache=True, inline="always")
-def _slope(code, n, a):
-    if code == 0:
-        return 1.0
-    if code == 1:
-        return 1.0 - a * a
-    if code == 2:
-        return math.cos(n)
-    if code == 4:
-        return 1.0 if -1.0 < n < 1.0 else 0.0
-    return -math.sin(n)
-
-
 @numba.njit(cache=True)
 def _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2):
     """One time step of eq. (1)-(2) and RTRL into slot ``t % ring``; also the block sensitivities `s_blk`
