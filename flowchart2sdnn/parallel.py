@@ -392,6 +392,6 @@ def fit_start(task: FitTask, start: np.ndarray) -> LMResult:
     -------
     LMResult
     """
-    problem = _problem(task)
+    problem = _problem(task).from_start(start)
     return levenberg_marquardt(problem.fun, np.asarray(start, dtype=float), task.names, task.lower, task.upper,
                                task.options, guard=problem.guard, residual=problem.residual)

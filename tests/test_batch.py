@@ -152,6 +152,34 @@ def test_parquet_without_pyarrow_is_a_clear_error(fleet, tmp_path):
         run_batch(fleet["diagram"], fleet["files"][:1], str(tmp_path / "r.parquet"), FAST)
 
 
+def test_parquet_table_equals_the_csv_table_and_resumes(fleet, tmp_path):
+    """Parquet holds the same rows as CSV (same types, the error row too) and a rerun skips done files."""
+    pytest.importorskip("pyarrow")
+    files = fleet["files"][:3] + [fleet["bad"]]
+    csv_out, pq_out = str(tmp_path / "r.csv"), str(tmp_path / "r.parquet")
+    run_batch(fleet["diagram"], files, csv_out, FAST)
+    first = run_batch(fleet["diagram"], files[:2], pq_out, FAST)
+    rest = run_batch(fleet["diagram"], files, pq_out, FAST)
+    assert (first.identified, rest.identified, rest.failed, rest.skipped) == (2, 1, 1, 2)
+    assert _table(pq_out) == _table(csv_out)
+    header, _, _ = read_results(pq_out)
+    assert header == read_results(csv_out)[0]
+    import pyarrow.parquet as pq
+
+    schema = pq.read_schema(pq_out)
+    assert str(schema.field("J1").type) == "double" and str(schema.field("rows").type) == "int64"
+    assert str(schema.field("error").type) == "string"
+
+
+def test_a_corrupt_parquet_table_is_a_one_line_error(fleet, tmp_path):
+    pytest.importorskip("pyarrow")
+    bad = tmp_path / "r.parquet"
+    bad.write_bytes(b"PAR1 not really")
+    with pytest.raises(SdnnError, match="BATCH004.*r.parquet"):
+        run_batch(fleet["diagram"], fleet["files"][:1], str(bad), FAST)
+    assert bad.read_bytes() == b"PAR1 not really"  # never overwritten
+
+
 def test_expand_files_globs_and_leaves_out_the_table(fleet):
     d = fleet["dir"]
     out = str(d / "results.csv")

@@ -19,6 +19,7 @@ effect         attaches at         adds
 friction       speed               nonlinear curve of the speed (tanh neurons with bias, v = 0) subtracted
                                    in its torque sum
 damping        speed, speed diff.  viscous gain with a new parameter (0) in the torque sum(s)
+offset         speed               a constant torque with a new parameter (0) in the speed's torque sum
 dead_time      input               a delay of n samples in front of every consumer of the input
 saturation     input               L*sat((u - o)/L) + o: a hard clip at o -/+ L, L scanned in the data range
 backlash       spring angle        c*x becomes c*x + an odd learned curve (v = 0) of x (a dead zone is learnable)
@@ -53,6 +54,7 @@ __all__ = [
     "Effect",
     "Friction",
     "Damping",
+    "Offset",
     "DeadTime",
     "Saturation",
     "Backlash",
@@ -176,6 +178,40 @@ class Damping:
 
     def describe(self) -> str:
         return "damping: a viscous gain with a new parameter on a speed or a speed difference"
+
+    def label(self, option) -> str:
+        return ""
+
+
+@dataclass(frozen=True)
+class Offset:
+    """A constant torque (force) ``c`` with a new parameter c, starting at 0, in a speed's torque sum.
+
+    What a drive's offset, a constant load or gravity on an inclined axis looks like; it also lets a
+    learned friction curve (:class:`Friction`) be asymmetric without bending its neurons into a constant.
+    """
+
+    name: str = "offset"
+    neutral: bool = True
+    extra_dof: int = 0
+
+    def places(self, diagram: Diagram) -> tuple[Place, ...]:
+        return speeds(diagram)
+
+    def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
+        return (None,)
+
+    def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
+        pname = fresh_name(diagram, f"c_{place.at}")
+        name = fresh_name(diagram, f"offset_{place.at}", {pname})
+        unit = next((b.unit for b in diagram.blocks if b.name == place.sums[0][0]), None) if place.sums else None
+        p = Parameter(pname, 0.0, unit=unit, description=f"constant torque in the sum of {place.at} (diagnose)")
+        block = Block(name, "constant", k=parse_expr(pname), unit=unit,
+                      description=f"constant torque in the sum of {place.at} (diagnose)")
+        return add_terms(add_blocks(diagram, [block], [p]), _sum_terms(place, name))
+
+    def describe(self) -> str:
+        return "offset: a constant torque (force) with a new parameter in a speed's torque sum"
 
     def label(self, option) -> str:
         return ""
@@ -405,7 +441,7 @@ class Cogging:
 
 # ------------------------------------------------------------------------------------------------ registry
 BUILTIN_EFFECTS: dict[str, Effect] = {
-    e.name: e for e in (Friction(), Damping(), DeadTime(), Saturation(), Backlash(), DeadZone(), Cogging())
+    e.name: e for e in (Friction(), Damping(), Offset(), DeadTime(), Saturation(), Backlash(), DeadZone(), Cogging())
 }
 
 

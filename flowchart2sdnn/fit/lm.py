@@ -50,6 +50,11 @@ class LMOptions:
 
     ``mu_min`` keeps mu from underflowing after a long run of accepted steps, so that a later rejection
     can raise it back to a useful size within ``max_mu_tries`` tries.
+
+    ``tau`` > 0 scales the first damping to the problem: ``mu = max(mu0, tau * max diag(JᵀJ))`` at the start
+    (Madsen, Nielsen & Tingleff, *Methods for non-linear least squares problems*, 2004, section 3.2).
+    trainlm's fixed ``mu0`` makes the first steps of a long record (diag(JᵀJ) of 1e6 and more) undamped
+    Gauss-Newton steps that jump across narrow cost valleys; 0 keeps trainlm's behaviour.
     """
 
     max_iter: int = 100
@@ -63,6 +68,7 @@ class LMOptions:
     min_rel_cost_change: float = 0.0
     max_mu_tries: int = 20
     mu_min: float = 1e-20
+    tau: float = 0.0
 
     def __post_init__(self) -> None:
         def need(cond: bool, text: str) -> None:
@@ -79,6 +85,7 @@ class LMOptions:
             "min_rel_step",
             "min_rel_cost_change",
             "mu_min",
+            "tau",
         ):
             need(math.isfinite(getattr(self, name)), f"`{name}` must be finite, got {getattr(self, name)}")
         need(
@@ -92,7 +99,7 @@ class LMOptions:
         need(0 < self.mu_min <= self.mu0 <= self.mu_max, "need 0 < `mu_min` <= `mu0` <= `mu_max`")
         need(self.mu_inc > 1, f"`mu_inc` must be > 1, got {self.mu_inc}")
         need(0 < self.mu_dec < 1, f"`mu_dec` must be in (0, 1), got {self.mu_dec}")
-        for name in ("min_grad", "cost_goal", "min_rel_step", "min_rel_cost_change"):
+        for name in ("min_grad", "cost_goal", "min_rel_step", "min_rel_cost_change", "tau"):
             need(getattr(self, name) >= 0, f"`{name}` must be >= 0, got {getattr(self, name)}")
 
 
@@ -318,8 +325,9 @@ def levenberg_marquardt(
             mu=opt.mu0,
         )
     point = _Point(u, x, first[0], first[1], _cost(first[0]))
+    mu0 = _first_mu(point, bounds, opt)
     # One object holds the whole state so that a KeyboardInterrupt can never leave it half-updated.
-    state = (point, opt.mu0, (point.cost,), (opt.mu0,))
+    state = (point, mu0, (point.cost,), (mu0,))
     status, detail = None, ""
     try:
         while True:
@@ -388,6 +396,18 @@ def levenberg_marquardt(
         rejected_guard=counters.rejected_guard,
         last_guard_reason=counters.last_guard_reason,
     )
+
+
+def _first_mu(point: _Point, bounds: Bounds, opt: LMOptions) -> float:
+    """trainlm's mu0, raised to tau * max diag(JᵀJ) (in the trainer's internal coordinates) when tau > 0."""
+    if opt.tau <= 0:
+        return opt.mu0
+    Ju = point.J * bounds.dx_du(point.u)
+    with np.errstate(over="ignore", invalid="ignore"):
+        peak = float(np.max(np.einsum("ij,ij->j", Ju, Ju), initial=0.0))
+    if not math.isfinite(peak):
+        return opt.mu_max
+    return float(min(opt.mu_max, max(opt.mu0, opt.tau * peak)))
 
 
 def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float, opt: LMOptions, counters):

@@ -117,6 +117,17 @@ class Problem:
         params, free = self.compiled.values(x)
         return rest_radii(self.network, self.network.weight_values(params, free))
 
+    def from_start(self, x: np.ndarray) -> Problem:
+        """This problem with the stability floor raised to what the start `x` itself has.
+
+        Each start of a multi-start gets its own floor: a drawn start that already drifts (or chatters) at rest
+        must be free to move towards stability, not have every step refused by the guard.
+        """
+        chatter, growth = self.stability(np.asarray(x, dtype=float))
+        floor = (max(self.stability_floor[0], chatter if chatter > CHATTER_LIMIT else 0.0),
+                 max(self.stability_floor[1], growth if growth > GROWTH_LIMIT else 0.0))
+        return self if floor == self.stability_floor else replace(self, stability_floor=floor)
+
     def chatter(self, x: np.ndarray) -> float:
         return self.stability(x)[0]
 

@@ -47,6 +47,8 @@ class IdentifySettings:
     online_start: int = 0
     fixed_from: tuple[str, ...] = ()
     ranges: dict = field(default_factory=dict)
+    # first LM damping = lm_tau * max diag(JᵀJ) (see fit.lm.LMOptions.tau); 0 gives trainlm's fixed 1e-3
+    lm_tau: float = 1e-3
 
     def __post_init__(self):
         if self.starts < 1:
@@ -57,6 +59,8 @@ class IdentifySettings:
             raise ValueError("--split must lie strictly between 0 and 1")
         if self.window < 2 or self.average < 1 or self.every < 1:
             raise ValueError("--window must be >= 2, --average and --every >= 1")
+        if not (self.lm_tau >= 0 and math.isfinite(self.lm_tau)):
+            raise ValueError("lm_tau must be a finite number >= 0")
 
 
 @dataclass(frozen=True, eq=False)
@@ -148,7 +152,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         interrupted = status == "interrupted"
     else:
         # stop once an iteration gains less than 1e-10 of the cost: further iterations only polish noise
-        options = LMOptions(max_iter=settings.max_iter, min_rel_cost_change=1e-10)
+        options = LMOptions(max_iter=settings.max_iter, min_rel_cost_change=1e-10, tau=settings.lm_tau)
         starts = draw_starts(names, x0, lower, upper, settings.starts, settings.seed,
                              ranges=settings.ranges or None)
 
@@ -158,8 +162,9 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
                     progress(f"LM iteration {it}, cost {cost:.6g}, mu {mu:.1e}",
                              min(1.0, it / max(1, settings.max_iter)))
                 return bool(stop and stop())
-            return levenberg_marquardt(problem.fun, start, names, lower, upper, options, callback=callback,
-                                       guard=problem.guard, residual=problem.residual)
+            own = problem.from_start(start)
+            return levenberg_marquardt(own.fun, start, names, lower, upper, options, callback=callback,
+                                       guard=own.guard, residual=own.residual)
 
         def start_done(i, result):
             if progress and settings.starts > 1:

@@ -529,6 +529,17 @@ def _lm_step(A, b, u_ref, u, mu, mu_inc, M, L, g, delta, its):
     return False
 
 
+@numba.njit(cache=True)
+def scaled_mu(A, mu0, tau, mu_max):
+    """The first damping scaled to the window: ``min(mu_max, max(mu0, tau * max diag(A)))`` (as fit/lm.py's
+    LMOptions.tau, in the same internal coordinates)."""
+    peak = 0.0
+    for p in range(A.shape[0]):
+        if math.isfinite(A[p, p]):
+            peak = max(peak, A[p, p])
+    return min(mu_max, max(mu0, tau * peak))
+
+
 # ------------------------------------------------------------------------------------------ parameters
 @numba.njit(cache=True)
 def _set(u, x, dxdu, conn_val, dval, bnd, wp, stack):
@@ -595,7 +606,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
 
     net  = (conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, output_index)
     wp   = :attr:`WeightProgram.exprs`;  bnd = (bound code (P,) int, lower (P,), upper (P,))
-    fopt = [mu_inc, mu_dec, mu_min, mu_max];  iopt = [start, every, block, record_every, stack size]
+    fopt = [mu_inc, mu_dec, mu_min, mu_max, tau];  iopt = [start, every, block, record_every, stack size]
     stm, stt, wnd = :meth:`OnlineState.model`, ``.trial``, ``.window``;  avg = (avg_x, avg_cost)
     rec_x (n_rec, P), rec_cost, rec_mu (n_rec,): records at the samples ``t % record_every == 0``.
 
@@ -606,7 +617,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
     win_J, win_c, win_e, A, b, u_ref = wnd
     avg_x, avg_cost = avg
     output_index = net[7]
-    mu_inc, mu_dec, mu_min, mu_max = fopt[0], fopt[1], fopt[2], fopt[3]
+    mu_inc, mu_dec, mu_min, mu_max, tau = fopt[0], fopt[1], fopt[2], fopt[3], fopt[4]
     start, every, block, record_every = iopt[0], iopt[1], iopt[2], iopt[3]
     n_theta = u.shape[0]
     n_out = output_index.shape[0]
@@ -689,6 +700,8 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
                         its[I_REJECTED] += 1
                     _new_block(stm, stt, bnd, wp, stack, fs, its)
                 if (t - start) % every == 0:
+                    if its[I_STEPS] == 0 and tau > 0.0:
+                        fs[F_MU] = scaled_mu(A, fs[F_MU], tau, mu_max)
                     if _lm_step(A, b, u_ref, u, fs[F_MU], mu_inc, M, L, g, delta, its):
                         u_save[:] = u_tr
                         for p in range(n_theta):
