@@ -86,10 +86,14 @@ def register(main: click.Group) -> None:
     @click.option("--seed", type=int, default=0, show_default=True, help="Seed for initial curves.")
     @click.option("--force", is_flag=True, help="Overwrite existing output files.")
     @click.option("--quiet", is_flag=True, help="No progress and no report text.")
+    @click.option("--workers", type=click.IntRange(min=1),
+                  help="Run the candidate refits in N local worker processes.")
+    @click.option("--scheduler", metavar="ADDRESS",
+                  help="Run the candidate refits on a Dask cluster (tcp://host:8786, or 'local').")
     @handle_errors
     def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
                  refit_iter, max_iter, top, criterion, min_gain, alpha, dead_time_max, harmonics, alignment,
-                 mapping, seed, force, quiet) -> None:
+                 mapping, seed, force, quiet, workers=None, scheduler=None) -> None:
         """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
         chart, refit, and report the error before and after."""
         from ..atomic import atomic_write_text, check_output_path
@@ -136,10 +140,23 @@ def register(main: click.Group) -> None:
                                     alpha=alpha, criterion=criterion, min_gain=min_gain, alignment=alignment,
                                     seed=seed, split=split)
         progress = Progress(quiet)
+        executor = None
         try:
-            outcome = run_diagnose(diagram, train if len(train) > 1 else train[0], val, settings, effects, progress)
+            if workers is not None or scheduler is not None:
+                from ..parallel import make_executor
+
+                executor = make_executor(workers, scheduler)
+            outcome = run_diagnose(diagram, train if len(train) > 1 else train[0], val, settings, effects, progress,
+                                   executor=executor)
+        except BaseException:
+            if executor is not None:
+                executor.close(cancel=True)
+            raise
         finally:
             progress.close()
+        if executor is not None:
+            # after Ctrl-C the refits still running are dropped, not waited for
+            executor.close(cancel=bool(outcome.report.get("interrupted")))
         report = outcome.report
         report["command"] = {"data": list(data), "diagram": chart, "validate": list(validation),
                              "effects_file": effects_file, "output": output, "map": dict(maps)}

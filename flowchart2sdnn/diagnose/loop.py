@@ -16,7 +16,9 @@ One round:
 
 AIC = N ln(SSE/N) + 2k and BIC = N ln(SSE/N) + k ln N on the training record, N the number of residuals, k
 the free quantities plus one per scanned discrete choice (a dead time's n, a cogging harmonic).
-Never prints: progress goes through ``progress(text, fraction)``.
+Never prints: progress goes through ``progress(text, fraction)``. The brief refits of a round are independent
+work units (:func:`refit_unit`): an executor (:mod:`flowchart2sdnn.parallel`) runs them in worker processes or on
+a Dask cluster with the same results as in this process.
 """
 
 from __future__ import annotations
@@ -37,7 +39,7 @@ from .effects import BUILTIN_EFFECTS, Effect, Scales
 from .residual import signal_correlation, whiteness
 from .score import Candidate, Score, Screen, screen
 
-__all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "REPORT_FORMAT", "REPORT_VERSION"]
+__all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "refit_unit", "REPORT_FORMAT", "REPORT_VERSION"]
 
 REPORT_FORMAT = "sdnn-diagnose"
 REPORT_VERSION = 1
@@ -283,7 +285,7 @@ def _was_interrupted(fitted) -> bool:
 
 def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: Sequence[Dataset] = (),
              settings: DiagnoseSettings = DiagnoseSettings(), effects: Sequence[Effect] | None = None,
-             progress: Progress | None = None) -> Diagnosis:
+             progress: Progress | None = None, executor=None) -> Diagnosis:
     """Find what `diagram` lacks from measured data, add it, refit, and report before and after.
 
     Parameters
@@ -300,6 +302,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
     effects : sequence of Effect, optional
         The library to try (default: every built-in effect).
     progress : callable(text, fraction), optional
+    executor : a :mod:`flowchart2sdnn.parallel` executor, optional
+        Runs the brief refits of each round (two per refitted candidate); in this process when None.
 
     Returns
     -------
@@ -337,11 +341,9 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             timing["screen"].append(scr.seconds)
             best = _refit_set(scr, settings)
             refits: list[tuple[Score, Fitted]] = []
-            for i, s in enumerate(best):
-                t0 = time.perf_counter()
-                say(f"round {r}: refit {s.candidate.title()} ({i + 1}/{len(best)})", None)
-                fitted = _refit(s.candidate, nominal_chart, train, records, settings, extra_dof, accepted)
-                timing["refit"].append(time.perf_counter() - t0)
+            for s, fitted, seconds in _refits(best, nominal_chart, train, records, settings, extra_dof, accepted,
+                                              executor, lambda text, r=r: say(f"round {r}: {text}", None)):
+                timing["refit"].append(seconds)
                 if _was_interrupted(fitted):
                     raise KeyboardInterrupt
                 if fitted is not None:
@@ -421,21 +423,52 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
     return Diagnosis(report, current.diagram, current, nominal, tuple(screens))
 
 
-def _refit(c: Candidate, nominal_chart: Diagram, train: list[Dataset], records, settings: DiagnoseSettings,
-           extra_dof: int, accepted: list) -> Fitted | None:
-    """Brief refits from the current fit and from the chart as given (plus accepted effects); the better."""
-    dof = extra_dof + c.effect.extra_dof
+def refit_unit(unit: tuple) -> tuple[Fitted | None, float]:
+    """One brief refit: (chart, train, records, settings, max_iter, dof, start, accepted) -> (Fitted or None,
+    seconds). Module level, so that any executor's worker can run it."""
+    chart, train, records, settings, max_iter, dof, start, acc = unit
+    t0 = time.perf_counter()
+    try:
+        fitted = _fit(chart, train, records, settings, max_iter, dof, start, None, acc)
+    except (SdnnError, ValueError, KeyError):
+        fitted = None
+    return fitted, time.perf_counter() - t0
+
+
+def _refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Dataset], records,
+            settings: DiagnoseSettings, extra_dof: int, accepted: list, executor, say: Callable[[str], None]):
+    """(score, the better of its brief refits or None, seconds) for each candidate in `best`, in order.
+
+    Each candidate is refitted from the current fit and from the chart as given (plus the accepted effects),
+    every one with its new effect at neutral values; ties go to the refit from the current fit.
+    """
     acc = tuple(a["effect"] + "@" + a["at"] for a in accepted)
-    best = None
-    for start, chart in (("previous", lambda: c.diagram),
-                         ("nominal", lambda: c.effect.patch(nominal_chart, c.place, c.option))):
-        try:
-            f = _fit(chart(), train, records, settings, settings.refit_iter, dof, start, None, acc)
-        except (SdnnError, ValueError, KeyError):
-            continue
-        if best is None or f.cost < best.cost:
-            best = f
-    return best
+    units, owner = [], []
+    for i, s in enumerate(best):
+        c = s.candidate
+        dof = extra_dof + c.effect.extra_dof
+        for start, chart in (("previous", lambda c=c: c.diagram),
+                             ("nominal", lambda c=c: c.effect.patch(nominal_chart, c.place, c.option))):
+            try:
+                units.append((chart(), train, records, settings, settings.refit_iter, dof, start, acc))
+            except (SdnnError, ValueError, KeyError):
+                continue
+            owner.append(i)
+    results = map(refit_unit, units) if executor is None else executor.map(refit_unit, units)
+    chosen: list[Fitted | None] = [None] * len(best)
+    seconds = [0.0] * len(best)
+    done = 0
+    for i, (fitted, sec) in zip(owner, results, strict=True):
+        done += 1
+        say(f"refit {best[i].candidate.title()} ({done}/{len(units)})")
+        seconds[i] += sec
+        if _was_interrupted(fitted):
+            yield best[i], fitted, seconds[i]
+            return
+        if fitted is not None and (chosen[i] is None or fitted.cost < chosen[i].cost):
+            chosen[i] = fitted
+    for i, s in enumerate(best):
+        yield s, chosen[i], seconds[i]
 
 
 def _round_entry(r: int, s: Score, before: Fitted, after: Fitted | None, accepted: bool, reason: str,

@@ -65,6 +65,8 @@ class OnlineOptions:
     mu_max: float = 1e10
     mu_min: float = 1e-12
     tau: float = 0.0
+    linearity_tol: float = ok.LINEARITY_TOL
+    mu_floor: float = 0.0
     record_every: int = 100
     block: int = 500
     chunk: int = 5000
@@ -75,11 +77,15 @@ class OnlineOptions:
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < low:
                 raise ValueError(f"`{name}` must be an int >= {low}, got {value!r}")
-        for name in ("mu0", "mu_inc", "mu_dec", "mu_min", "mu_max", "tau"):
+        for name in ("mu0", "mu_inc", "mu_dec", "mu_min", "mu_max", "tau", "linearity_tol", "mu_floor"):
             if not math.isfinite(getattr(self, name)):
                 raise ValueError(f"`{name}` must be finite, got {getattr(self, name)}")
         if not 0 < self.mu_min <= self.mu0 <= self.mu_max:
             raise ValueError("need 0 < `mu_min` <= `mu0` <= `mu_max`")
+        if not self.linearity_tol > 0:
+            raise ValueError(f"`linearity_tol` must be > 0, got {self.linearity_tol}")
+        if not self.mu_floor >= 0:
+            raise ValueError(f"`mu_floor` must be >= 0, got {self.mu_floor}")
         if not self.tau >= 0:
             raise ValueError(f"`tau` must be >= 0, got {self.tau}")
         if not self.mu_inc > 1:
@@ -211,7 +217,9 @@ class OnlineRun:
                      compiled._dptr, compiled._dtheta, flat.output_index)
         self._bnd = (_bound_codes(self.bounds), np.array(self.bounds.lower, dtype=float),
                      np.array(self.bounds.upper, dtype=float))
-        self._fopt = np.array([opt.mu_inc, opt.mu_dec, opt.mu_min, opt.mu_max, opt.tau], dtype=float)
+        self._fopt = np.array([opt.mu_inc, opt.mu_dec, opt.mu_min, opt.mu_max, opt.tau, opt.linearity_tol,
+                               opt.mu_floor],
+                               dtype=float)
         self._iopt = np.array([opt.start, opt.every, opt.block, opt.record_every, prog.stack], dtype=np.int64)
         n_rec = -(-self.n_samples // opt.record_every)
         self._rec_x = np.zeros((n_rec, compiled.n_theta))

@@ -606,7 +606,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
 
     net  = (conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, output_index)
     wp   = :attr:`WeightProgram.exprs`;  bnd = (bound code (P,) int, lower (P,), upper (P,))
-    fopt = [mu_inc, mu_dec, mu_min, mu_max, tau];  iopt = [start, every, block, record_every, stack size]
+    fopt = [mu_inc, mu_dec, mu_min, mu_max, tau, linearity_tol, mu_floor];  iopt = [start, every, block, record_every, stack size]
     stm, stt, wnd = :meth:`OnlineState.model`, ``.trial``, ``.window``;  avg = (avg_x, avg_cost)
     rec_x (n_rec, P), rec_cost, rec_mu (n_rec,): records at the samples ``t % record_every == 0``.
 
@@ -617,7 +617,8 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
     win_J, win_c, win_e, A, b, u_ref = wnd
     avg_x, avg_cost = avg
     output_index = net[7]
-    mu_inc, mu_dec, mu_min, mu_max, tau = fopt[0], fopt[1], fopt[2], fopt[3], fopt[4]
+    mu_inc, mu_dec, mu_min, mu_max, tau, lin_tol = fopt[0], fopt[1], fopt[2], fopt[3], fopt[4], fopt[5]
+    mu_floor = fopt[6]
     start, every, block, record_every = iopt[0], iopt[1], iopt[2], iopt[3]
     n_theta = u.shape[0]
     n_out = output_index.shape[0]
@@ -691,7 +692,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
                 fs[F_NL] += nl
                 its[I_BLOCK_POS] += 1
                 if its[I_BLOCK_POS] >= block:
-                    if fs[F_NL] <= LINEARITY_TOL * fs[F_CH]:
+                    if fs[F_NL] <= lin_tol * fs[F_CH]:
                         _adopt_trial(stm, stt, bnd, wp, stack)
                         fs[F_MU] = max(fs[F_MU] * mu_dec, mu_min)
                         its[I_ACCEPTED] += 1
@@ -702,7 +703,10 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
                 if (t - start) % every == 0:
                     if its[I_STEPS] == 0 and tau > 0.0:
                         fs[F_MU] = scaled_mu(A, fs[F_MU], tau, mu_max)
-                    if _lm_step(A, b, u_ref, u, fs[F_MU], mu_inc, M, L, g, delta, its):
+                    mu_step = fs[F_MU]
+                    if mu_floor > 0.0:
+                        mu_step = max(mu_step, scaled_mu(A, 0.0, mu_floor, mu_max))
+                    if _lm_step(A, b, u_ref, u, mu_step, mu_inc, M, L, g, delta, its):
                         u_save[:] = u_tr
                         for p in range(n_theta):
                             u_tr[p] = u[p] + delta[p]
