@@ -5,8 +5,12 @@ EMPS (../shared/data/real/emps): the chart is a mass with viscous friction only
 as given and the augmented chart are then refitted on the whole train.csv and simulated on the official test
 record (test.csv, the pulses record) from the force alone, the initial position and speed taken from a
 quadratic fit to the first 20 samples; the score is the RMSE of samples 20.. in mm (the benchmark protocol).
-The learned friction curve plus the viscous term is least-squares fitted by Fv*v + Fc*sign(v) + offset (and
-per direction) over the speed range of the data, to compare with the published IDIM-LS values.
+train.csv starts in motion too: by default the chart's speed starts at train's v0 (same fit) for diagnose and
+the refit (`moving_start`); the runs with v0 = 0 are printed first for comparison. The identified friction
+force (viscous term plus learned curve or the physical `coulomb` terms) is least-squares fitted by
+Fv*v + Fc*sign(v) + offset (and per direction) over the speed range of the data, to compare with the
+published IDIM-LS values. `emps_spread` refits the diagnosed chart on other stretches (halves of train, the
+test record itself as an oracle) to show how much the test RMSE depends on the friction of the stretch.
 
 UWaterloo MTE 360 flexible drive: the chart without Coulomb friction (diagrams/real/flexible_drive_linear.yaml),
 trained on square_2V, validated on square_1p5V; fit % before and after on every record of the folder.
@@ -43,19 +47,30 @@ def initial_state(time_s: np.ndarray, q: np.ndarray, n: int = 20) -> tuple[float
     return float(c[2]), float(c[1])
 
 
+def with_initial_speed(diagram, record):
+    """The chart with the speed integrator `v` starting at the record's v0 (quadratic fit, first 20 samples)."""
+    _, v0 = initial_state(record.time, record.columns["q"])
+    return dataclasses.replace(diagram, blocks=tuple(
+        dataclasses.replace(b, init=v0) if b.name == "v" else b for b in diagram.blocks))
+
+
 def emps_test_rmse_mm(diagram, test) -> float:
     """Free-run simulation RMSE on the test record, samples 20.., in mm (initial state from the first 20)."""
     q, force = test.columns["q"], test.columns["F"]
-    q0, v0 = initial_state(test.time, q)
-    chart = dataclasses.replace(diagram, blocks=tuple(
-        dataclasses.replace(b, init=v0) if b.name == "v" else b for b in diagram.blocks))
+    q0, _ = initial_state(test.time, q)
+    chart = with_initial_speed(diagram, test)
     compiled = CompiledNetwork(compile_diagram(chart).network)
     y = run_aligned(compiled, compiled.theta0(), force[:, None], "zoh", {"q": q0})[:, 0]
     return 1000.0 * float(np.sqrt(np.mean((q[20:] - y[20:]) ** 2)))
 
 
 def friction_coefficients(result: dict, speed_max: float) -> dict:
-    """Fv, Fc, offset of the identified friction (viscous gain + learned curve), symmetric and per direction."""
+    """Fv, Fc, offset of the identified friction, symmetric and per direction.
+
+    The friction force is the chart's viscous term plus what diagnose added: learned curves (`friction`) and
+    the physical terms of `coulomb` (Fc_v*sign(v) + c_v + dFv_v*max(v, 0); sign for the sign_smooth, whose
+    eps is far below the smallest speed sampled here).
+    """
     p = {k: v["value"] for k, v in result["parameters"].items()}
     v = np.concatenate([-np.linspace(0.05, 1, 200), np.linspace(0.05, 1, 200)]) * speed_max
     force = p.get("Fv", 0.0) * v
@@ -63,6 +78,7 @@ def friction_coefficients(result: dict, speed_max: float) -> dict:
         a, vv = np.asarray(w["a"]), np.asarray(w["v"])
         b = np.asarray(w.get("b") or np.zeros_like(a))
         force = force + np.tanh(np.outer(v, a) + b) @ vv
+    force = force + p.get("Fc_v", 0.0) * np.sign(v) + p.get("c_v", 0.0) + p.get("dFv_v", 0.0) * np.maximum(v, 0.0)
     sym = np.linalg.lstsq(np.column_stack([v, np.sign(v), np.ones_like(v)]), force, rcond=None)[0]
     out = {"M": p["M"], "Fv": sym[0], "Fc": sym[1], "offset": sym[2]}
     for side, mask in (("+", v > 0), ("-", v < 0)):
@@ -71,15 +87,21 @@ def friction_coefficients(result: dict, speed_max: float) -> dict:
     return out
 
 
-def emps(rounds: int = 3) -> None:
+def emps(rounds: int = 3, moving_start: bool = True):
+    """diagnose, refit on all of train, test RMSE. `moving_start`: the training record starts in motion too
+    (about 6 mm/s), so the chart's speed starts at train's v0 (quadratic fit to its first 20 samples), as the
+    test simulation does; without it the speed starts at 0 and the fit bends the friction to make up for it."""
     folder = REAL / "emps"
     maps = {"F": "force_N", "q": "q_meas_m"}
     train = read_csv(folder / "train.csv", ["F", "q"], maps, 0.001)
     test = read_csv(folder / "test.csv", ["F", "q"], maps, 0.001)
+    chart = load_diagram(ROOT / "tests" / "data" / "diagnose" / "emps_mass.yaml")
+    if moving_start:
+        chart = with_initial_speed(chart, train)
     t0 = time.perf_counter()
-    d = diagnose(load_diagram(ROOT / "tests" / "data" / "diagnose" / "emps_mass.yaml"), train, (),
-                 DiagnoseSettings(rounds=rounds))
-    print(f"EMPS diagnose --rounds {rounds}: {time.perf_counter() - t0:.0f} s; accepted: "
+    d = diagnose(chart, train, (), DiagnoseSettings(rounds=rounds))
+    start = "v0 from train" if moving_start else "v0 = 0"
+    print(f"EMPS diagnose --rounds {rounds} ({start}): {time.perf_counter() - t0:.0f} s; accepted: "
           + ", ".join(f"{a['effect']} at {a['at']}" + (f" ({a['label']})" if a["label"] else "")
                       for a in d.report["accepted"]))
     for r in d.report["rounds"]:
@@ -92,12 +114,33 @@ def emps(rounds: int = 3) -> None:
         print(f"  {name}: validation (last 30 % of train) {val_mm:.2f} mm; refitted on all of train: "
               f"test RMSE {emps_test_rmse_mm(full.diagram, test):.2f} mm "
               f"(without refit {emps_test_rmse_mm(fitted.diagram, test):.2f} mm)")
-        if full.result["nonlinear"]:
+        print("    parameters: " + ", ".join(f"{k} = {v['value']:.4g}" for k, v in full.result["parameters"].items()))
+        if len(full.result["parameters"]) > 2 or full.result["nonlinear"]:
             c = friction_coefficients(full.result, speed)
-            print("    " + ", ".join(f"{k} = {v:.4g}" for k, v in c.items()))
-        else:
-            print("    " + ", ".join(f"{k} = {v['value']:.4g}" for k, v in full.result["parameters"].items()))
+            print("    friction: " + ", ".join(f"{k} = {v:.4g}" for k, v in c.items()))
     print("  published (IDIM-LS): " + ", ".join(f"{k} = {v}" for k, v in PUBLISHED.items()))
+    return d
+
+
+def emps_spread(diagram, train, test) -> None:
+    """How much the test RMSE depends on which stretch of measurements the same chart is fitted on.
+
+    The chart (the diagnosed one) is refitted on windows of train.csv, each simulated from its own first
+    sample (v0 from the quadratic fit), and on test.csv itself (an oracle, not a benchmark result: it shows
+    what the structure can reach on that record).
+    """
+    n = train.n_rows
+    windows = {"all of train": train, "first 70 % of train": train.slice(0, int(0.7 * n)),
+               "first half of train": train.slice(0, n // 2), "second half of train": train.slice(n // 2, n),
+               "test itself (oracle)": test}
+    print("  | fitted on | RMSE on its window [mm] | test RMSE [mm] | M | Fv+ | Fv- | Fc+ | Fc- |")
+    print("  |---|---|---|---|---|---|---|---|")
+    for name, ds in windows.items():
+        fit = identify(with_initial_speed(diagram, ds), ds, None, IdentifySettings(max_iter=150))
+        c = friction_coefficients(fit.result, 0.12)
+        own = 1000 * fit.result["fit"]["train"]["rms"]["q"]
+        print(f"  | {name} | {own:.2f} | {emps_test_rmse_mm(fit.diagram, test):.2f} | {c['M']:.2f} | "
+              f"{c['Fv+']:.1f} | {c['Fv-']:.1f} | {c['Fc+']:.2f} | {c['Fc-']:.2f} |")
 
 
 def flexible() -> None:
@@ -132,7 +175,13 @@ if __name__ == "__main__":
     if not REAL.is_dir():
         sys.exit(f"{REAL} is absent")
     if "emps" in which:
+        emps(3, moving_start=False)
+        emps(1, moving_start=False)
         emps(3)
-        emps(1)
+        d1 = emps(1)
+        maps = {"F": "force_N", "q": "q_meas_m"}
+        tr, te = (read_csv(REAL / "emps" / f, ["F", "q"], maps, 0.001) for f in ("train.csv", "test.csv"))
+        print("EMPS, the chart after diagnose --rounds 1 refitted on other stretches:")
+        emps_spread(d1.final.diagram, tr, te)
     if "flexible" in which:
         flexible()
