@@ -64,6 +64,10 @@ class DiagnoseSettings:
     alignment: str = "zoh"
     seed: int = 0
     split: float | None = None
+    # trainlm's fixed first damping (IdentifySettings.lm_tau = 0): the brief refits start next to a fit, where
+    # identify's scaled damping spends the few iterations they have on short steps (measured on the backlash
+    # bench: validation RMS down 3.2x with 0, 2.2x with identify's 1e-3)
+    lm_tau: float = 0.0
 
     def __post_init__(self) -> None:
         if self.rounds < 0:
@@ -151,7 +155,7 @@ def _validate(ident: Identification, records: Sequence[tuple[Dataset, int]], ali
 
 def _fit(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int, extra_dof: int,
          start: str, progress: Progress | None = None, accepted: tuple = ()) -> Fitted:
-    s = IdentifySettings(max_iter=max_iter, seed=settings.seed, alignment=settings.alignment)
+    s = IdentifySettings(max_iter=max_iter, seed=settings.seed, alignment=settings.alignment, lm_tau=settings.lm_tau)
     ident = identify(diagram, train if len(train) > 1 else train[0], None, s, progress)
     cost = ident.result["fit"]["train"]["cost"]
     cost = math.inf if cost is None else float(cost)
