@@ -66,7 +66,8 @@ def test_first_lm_step_equals_the_hand_computation():
     cn = feedback_neuron()
     assert cn.names == ("k", "w")
     lo_k, mu0 = 0.1, 0.05
-    opts = OnlineOptions(window=64, start=n - 1, block=10**6, mu0=mu0, record_every=1, average=10)
+    # the trial mode (tries=0) takes an LM step at every sample and exposes it as the trial
+    opts = OnlineOptions(window=64, start=n - 1, block=10**6, mu0=mu0, record_every=1, average=10, tries=0)
     run = OnlineRun(cn, u[:, None], target[:, None], lower=[lo_k, -np.inf], options=opts)
     assert run.advance(n)
 

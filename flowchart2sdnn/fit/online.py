@@ -1,17 +1,23 @@
 """Quasi-online Levenberg-Marquardt with a sliding window (paper section 3.1, Tables 1-2, Figs. 8-9).
 
 The model runs free alongside the record with the accepted parameters; RTRL gives each new sample's
-Jacobian row; a FIFO window keeps the last Q rows and the running sums of the normal equations; every
-``every`` samples one LM step from the accepted parameters on the current window gives the *trial*, which a
-second copy of the network simulates; every ``block`` samples the trial is accepted or refused and mu
-adapted (trainlm's x10 / /10). The whole time loop is one numba kernel
-(:mod:`flowchart2sdnn.network.online_kernel`, whose docstring states the algorithm, the first-order
-correction of the stale window errors and the mu rule and why); this module validates the arguments, runs
-the kernel in chunks (progress callback, Ctrl-C between chunks) and packs the result. Memory is O(Q P + K P)
-whatever the record length, plus the decimated records.
+Jacobian row; a FIFO window keeps the last Q rows and the running sums of the normal equations. Two ways to
+step (the numba kernel :mod:`flowchart2sdnn.network.online_kernel` states both and why):
 
-The reported estimate is the mean of the accepted parameters over the last K = ``average`` LM steps and the
-reported error the mean window cost over the same steps, as in the paper's Tables 1 and 2.
+* window mode (``tries >= 1``, default): every ``block`` samples one trainlm iteration on the window, each
+  trial judged by simulating the window's samples again at it, an accepted trial relinearising the window
+  (so every iteration is an exact LM iteration on the last Q samples, from past data only);
+* trial mode (``tries = 0``, the earlier algorithm): one LM step every ``every`` samples on the rows as they
+  were linearised (corrected to first order), a second network copy simulating the trial, accepted or
+  refused every ``block`` samples by a linearity test.
+
+This module validates the arguments, runs the kernel in chunks (progress callback, Ctrl-C between chunks) and
+packs the result. Memory is O(Q (P + N) + K P) whatever the record length (N: the network's nodes), plus the
+decimated records.
+
+The reported estimate is the mean of the accepted parameters over the last K = ``average`` steps (window
+mode: samples) and the reported error the mean window cost over the same steps, as in the paper's Tables 1
+and 2.
 """
 
 from __future__ import annotations
@@ -44,15 +50,24 @@ class OnlineOptions:
     """Settings of :func:`quasi_online` (sizes in samples).
 
     window : Q, samples in the sliding window (paper: 25000).
-    every : one LM step every `every` samples (paper: 1).
-    average : K, the estimate is the mean over the last K LM steps (paper: 25000).
+    every : trial mode: one LM step every `every` samples (paper: 1).
+    average : K, the estimate is the mean over the last K steps (paper: 25000); window mode: samples.
     start : first sample with an LM step (paper: 5 s = 5000); rows are collected from sample 0.
     mu0, mu_inc, mu_dec, mu_min, mu_max : damping schedule (trainlm names): mu is multiplied by mu_dec when a
-        block accepts the trial, by mu_inc when it refuses it or the trial diverges.
+        trial is accepted, by mu_inc when it is refused or diverges.
     record_every : decimation of the parameter and cost records.
-    block : samples per accept/refuse test of the trial (see :mod:`flowchart2sdnn.network.online_kernel`);
+    block : window mode: samples between LM iterations once the window is full (while it fills,
+        ``max(min_block, block * rows / window)``); trial mode: samples per accept/refuse test of the trial,
         at most one accepted LM iterate per block.
     chunk : samples per kernel call (progress callback and Ctrl-C act between chunks).
+    tries : window mode: LM trials per iteration (trainlm retries with mu *= mu_inc after a refusal);
+        0 selects the trial mode.
+    min_block : window mode: fewest samples between two iterations while the window fills.
+    tau : window mode: the first damping is ``max(mu0, tau * max diag(JᵀJ))`` on the window (as
+        ``LMOptions.tau`` of fit/lm.py); 0 keeps mu0.
+
+    The defaults of the window mode (tries 2, block 500, min_block 200, tau 1) are those that met the paper
+    experiment's acceptance from three of its four starts (docs/paper_experiment.md).
     """
 
     window: int = 25000
@@ -64,28 +79,24 @@ class OnlineOptions:
     mu_dec: float = 0.1
     mu_max: float = 1e10
     mu_min: float = 1e-12
-    tau: float = 0.0
-    linearity_tol: float = ok.LINEARITY_TOL
-    mu_floor: float = 0.0
     record_every: int = 100
     block: int = 500
     chunk: int = 5000
+    tries: int = 2
+    min_block: int = 200
+    tau: float = 1.0
 
     def __post_init__(self) -> None:
         for name, low in (("window", 1), ("every", 1), ("average", 1), ("start", 0), ("record_every", 1),
-                          ("block", 1), ("chunk", 1)):
+                          ("block", 1), ("chunk", 1), ("tries", 0), ("min_block", 1)):
             value = getattr(self, name)
             if not isinstance(value, (int, np.integer)) or isinstance(value, bool) or value < low:
                 raise ValueError(f"`{name}` must be an int >= {low}, got {value!r}")
-        for name in ("mu0", "mu_inc", "mu_dec", "mu_min", "mu_max", "tau", "linearity_tol", "mu_floor"):
+        for name in ("mu0", "mu_inc", "mu_dec", "mu_min", "mu_max", "tau"):
             if not math.isfinite(getattr(self, name)):
                 raise ValueError(f"`{name}` must be finite, got {getattr(self, name)}")
         if not 0 < self.mu_min <= self.mu0 <= self.mu_max:
             raise ValueError("need 0 < `mu_min` <= `mu0` <= `mu_max`")
-        if not self.linearity_tol > 0:
-            raise ValueError(f"`linearity_tol` must be > 0, got {self.linearity_tol}")
-        if not self.mu_floor >= 0:
-            raise ValueError(f"`mu_floor` must be >= 0, got {self.mu_floor}")
         if not self.tau >= 0:
             raise ValueError(f"`tau` must be >= 0, got {self.tau}")
         if not self.mu_inc > 1:
@@ -104,7 +115,8 @@ class OnlineResult:
     theta_mean : ndarray (P,)            mean of the accepted parameters (external) over the last
                                          `averaged_steps` LM steps
     theta_final : ndarray (P,)           accepted parameters after the last processed sample
-    steps : int                          LM steps (solves) attempted: one per `every` samples from `start`
+    steps : int                          trial mode: LM steps (solves) attempted, one per `every` samples
+                                         from `start`; window mode: samples from `start`
     status, message : str                a key of ``STATUS_MESSAGES`` and a sentence with details
     trajectory_time : ndarray (n_rec,)   s, samples ``0, record_every, ...`` times the sample time
     trajectory : ndarray (n_rec, P)      accepted parameters after each recorded sample
@@ -212,15 +224,14 @@ class OnlineRun:
         prog = self.program
         self.state = ok.new_state(self.bounds.start(x0), prog.n_connections, prog.n_slots,
                                   compiled._history(init), flat.ring, opt.window, compiled.n_outputs,
-                                  opt.average, opt.mu0)
+                                  opt.average, opt.mu0, replay=opt.tries > 0)
         self._net = (flat.conn_ptr, flat.conn_kind, flat.conn_src, flat.conn_delay, flat.transfer,
                      compiled._dptr, compiled._dtheta, flat.output_index)
         self._bnd = (_bound_codes(self.bounds), np.array(self.bounds.lower, dtype=float),
                      np.array(self.bounds.upper, dtype=float))
-        self._fopt = np.array([opt.mu_inc, opt.mu_dec, opt.mu_min, opt.mu_max, opt.tau, opt.linearity_tol,
-                               opt.mu_floor],
-                               dtype=float)
-        self._iopt = np.array([opt.start, opt.every, opt.block, opt.record_every, prog.stack], dtype=np.int64)
+        self._fopt = np.array([opt.mu_inc, opt.mu_dec, opt.mu_min, opt.mu_max, opt.tau], dtype=float)
+        self._iopt = np.array([opt.start, opt.every, opt.block, opt.record_every, prog.stack, opt.tries,
+                               opt.min_block], dtype=np.int64)
         n_rec = -(-self.n_samples // opt.record_every)
         self._rec_x = np.zeros((n_rec, compiled.n_theta))
         self._rec_cost = np.zeros(n_rec)
@@ -240,7 +251,7 @@ class OnlineRun:
         st = self.state
         code = ok.online_chunk(self.done, min(int(end), self.n_samples), self.inputs, self.targets, self._net,
                                self.program.exprs, self._bnd, self._fopt, self._iopt, st.model(), st.trial(),
-                               st.window(), (st.avg_x, st.avg_cost), st.fs, st.its, st.div_t, self._rec_x,
+                               st.window(), st.replay(), (st.avg_x, st.avg_cost), st.fs, st.its, st.div_t, self._rec_x,
                                self._rec_cost, self._rec_mu)
         if code == ok.STATUS_DIVERGED_BEFORE_START:
             self.diverged_at_start = True
@@ -252,7 +263,8 @@ class OnlineRun:
         return self.x0.copy() if self.diverged_at_start else self.bounds.to_external(self.state.u)
 
     def trial_theta(self) -> np.ndarray:
-        """The current trial parameters (external): one LM step from :meth:`theta` on the current window."""
+        """Trial mode: the current trial parameters (external), one LM step from :meth:`theta` on the current
+        window (window mode: :meth:`theta` between iterations)."""
         return self.bounds.to_external(self.state.u_tr)
 
     def result(self, status: str) -> OnlineResult:
@@ -338,7 +350,8 @@ def _result(run: OnlineRun, status: str) -> OnlineResult:
     T = float(run.compiled.net.sample_time)
     times = np.arange(n_rec) * opt.record_every * T
     mu = float(st.fs[ok.F_MU])
-    message = (f"{STATUS_MESSAGES[status]} ({steps} LM steps over {done} samples; mean window cost "
+    what = "LM steps" if opt.tries == 0 else "samples with LM iterations on the window"
+    message = (f"{STATUS_MESSAGES[status]} ({steps} {what} over {done} samples; mean window cost "
                f"{mean_cost:.6g} over the last {n_avg} steps; mu {mu:.3g}; trials accepted "
                f"{int(its[ok.I_ACCEPTED])}, refused {int(its[ok.I_REJECTED])}; divergences "
                f"{int(its[ok.I_DIVERGED])})")

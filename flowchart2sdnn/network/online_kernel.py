@@ -1,8 +1,32 @@
-"""The numba kernel of the quasi-online Levenberg-Marquardt run (paper section 3.1) and its weight program.
+"""The numba kernel of the quasi-online Levenberg-Marquardt run (paper section 3.1).
 
 One call of :func:`online_chunk` advances the run over samples ``[t0, t1)``; all state lives in arrays the
 caller allocates once (:func:`new_state`) and the kernel mutates, so a run can be cut into chunks (progress,
-Ctrl-C) without changing a single number. Two copies of the network run free alongside the record:
+Ctrl-C) without changing a single number. Two algorithms share the window and the model:
+
+**Window mode** (``tries >= 1``, the default of :class:`flowchart2sdnn.fit.online.OnlineOptions`). The model
+runs free with the accepted parameters u and RTRL; every sample's row (``J``, ``e``) enters the FIFO window of Q
+rows together with the network state before that sample. Every ``block`` samples from ``start`` on (fewer
+while the window fills: ``max(min_block, block * rows / Q)``, an iteration costs in proportion to the rows) one
+LM iteration runs on the window, trainlm's: the step ``(A + mu I) du = J^T e`` from u; the window's samples are
+simulated again at ``u + du`` from the stored state before the oldest row (past data only, nothing after the
+current sample); the trial is accepted when its window cost is below the window cost at u, ``mu *= mu_dec``,
+else refused, ``mu *= mu_inc`` and retried, up to ``tries`` trials per iteration. An accepted trial is
+relinearised: the window's samples are simulated once more with RTRL at the new u (sensitivities zero before
+the oldest row) and replace every row's Jacobian, error and stored state; the model continues from the state
+and sensitivities after the newest sample. So every iteration is an exact LM iteration on the last Q samples,
+and the rows never go stale. The first damping is scaled to the window: ``mu = max(mu0, tau * max diag(A))``
+at the first iteration (as fit/lm.py's ``LMOptions.tau``); ``tau = 0`` keeps mu0. Cost: one simulation of the
+window per trial and one RTRL pass per accepted trial.
+
+Why (measured on the paper's experiment, docs/paper_experiment.md): the trial mode below keeps each row as it
+was linearised, corrected to first order; the parameters move far within a window (J1 from 0.6 or 0.01 to 0.19,
+c from 100 or 800 to 477), so the corrected rows mispredicted the window cost by 10-50x at the current point
+(the window cost of the rows' linear model 2.7e5 against the actual 4.5e4 at t = 10 s from J1 = 0.6), each
+accepted step only moved to the minimum of that stale model, and none of the four starts met the acceptance.
+
+**Trial mode** (``tries = 0``, the previous algorithm, kept for comparison). Two copies of the network run free
+alongside the record:
 
 * the *model*, with the accepted internal parameters u: an RTRL step per sample (as
   :func:`.kernels.jacobian_kernel`) gives its output and ``S(t) = d a(t) / d x``; the window row is
@@ -49,9 +73,8 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from ..diagram.expr import BinOp, Neg, Num, Var
 from .kernels import _slope, _transfer  # one definition of the transfer functions for both kernels
-from .runtime import CompiledNetwork
+from .weight_program import WeightProgram, eval_weights, weight_program  # noqa: F401 - re-exported
 
 __all__ = [
     "WeightProgram",
@@ -62,11 +85,12 @@ __all__ = [
     "prepare",
     "eval_weights",
     "cholesky_solve",
+    "scaled_mu",
+    "window_sim",
+    "window_rtrl",
     "LINEARITY_TOL",
 ]
 
-OP_CONST, OP_VAR, OP_NEG, OP_ADD, OP_SUB, OP_MUL, OP_DIV, OP_POW = range(8)
-_BINARY = {"+": OP_ADD, "-": OP_SUB, "*": OP_MUL, "/": OP_DIV, "^": OP_POW}
 #: A trial is accepted when, over its block, the part of its output change that the first-order prediction
 #: misses is at most this fraction of the predicted change (both as sums of squares).
 LINEARITY_TOL = 0.25
@@ -76,153 +100,6 @@ F_MU, F_EE, F_CC, F_CH, F_NL = range(5)
  I_SKIPPED, I_RESYNC, I_N_DIV_T, I_NEXT, I_SINCE_RESYNC) = range(13)
 N_FS, N_ITS = 5, 13
 STATUS_OK, STATUS_DIVERGED_BEFORE_START = 0, 1
-
-
-# ------------------------------------------------------------------------------------------ weight program
-@dataclass(frozen=True, eq=False)
-class WeightProgram:
-    """The connection values and their theta-derivatives as postfix programs numba can evaluate.
-
-    ``exprs`` is the tuple of numba arguments read by :func:`eval_weights`: (ops, iarg, farg, ptr,
-    weight_expr, weight_free, weight_conn, term_slot, term_free, theta_is_param, theta_idx, pv0, fw0).
-    Programs ``0 .. n_coef-1`` are the distinct coef expressions, then one per derivative term.
-    """
-
-    exprs: tuple
-    n_connections: int
-    n_slots: int
-    stack: int
-
-
-def _postfix(expr, index: dict[str, int], ops: list, iarg: list, farg: list) -> None:
-    if isinstance(expr, Num):
-        ops.append(OP_CONST), iarg.append(0), farg.append(expr.value)
-    elif isinstance(expr, Var):
-        ops.append(OP_VAR), iarg.append(index[expr.name]), farg.append(0.0)
-    elif isinstance(expr, Neg):
-        _postfix(expr.arg, index, ops, iarg, farg)
-        ops.append(OP_NEG), iarg.append(0), farg.append(0.0)
-    elif isinstance(expr, BinOp):
-        _postfix(expr.left, index, ops, iarg, farg)
-        _postfix(expr.right, index, ops, iarg, farg)
-        ops.append(_BINARY[expr.op]), iarg.append(0), farg.append(0.0)
-    else:  # pragma: no cover - the expression language has no other node
-        raise TypeError(f"unknown expression node {type(expr).__name__}")
-
-
-def weight_program(compiled: CompiledNetwork) -> WeightProgram:
-    """Compile the weight expressions of `compiled` (its coefs and their derivatives) for :func:`eval_weights`.
-
-    Reads the runtime's private tables (same package): the distinct coef expressions, the weight -> coef and
-    weight -> free-weight maps, the derivative terms and their connection/theta slots.
-    """
-    net = compiled.net
-    pindex = {p.name: i for i, p in enumerate(net.parameters)}
-    findex = {f.name: i for i, f in enumerate(net.free_weights)}
-    ops: list[int] = []
-    iarg: list[int] = []
-    farg: list[float] = []
-    ptr = [0]
-    programs = list(compiled._exprs) + [expr for _, _, expr, _ in compiled._terms]
-    for expr in programs:
-        _postfix(expr, pindex, ops, iarg, farg)
-        ptr.append(len(ops))
-    weight_free = [findex[f] if f is not None else -1 for f in compiled._weight_free]
-    term_free = [findex[f] if f is not None else -1 for _, _, _, f in compiled._terms]
-    theta_is_param = [1 if n in pindex and n in compiled._theta_param else 0 for n in compiled.names]
-    theta_idx = [pindex[n] if flag else findex[n] for n, flag in zip(compiled.names, theta_is_param, strict=True)]
-    i64 = np.int64
-    exprs = (
-        np.array(ops, dtype=i64),
-        np.array(iarg, dtype=i64),
-        np.array(farg, dtype=float),
-        np.array(ptr, dtype=i64),
-        np.ascontiguousarray(compiled._weight_expr, dtype=i64),
-        np.array(weight_free, dtype=i64),
-        np.ascontiguousarray(compiled._flat.weight_conn, dtype=i64),
-        np.ascontiguousarray(compiled._term_slot, dtype=i64),
-        np.array(term_free, dtype=i64),
-        np.array(theta_is_param, dtype=i64),
-        np.array(theta_idx, dtype=i64),
-        np.array([float(p.init) for p in net.parameters], dtype=float),
-        np.array([float(f.init) for f in net.free_weights], dtype=float),
-    )
-    longest = max([b - a for a, b in zip(ptr[:-1], ptr[1:], strict=True)] + [1])
-    return WeightProgram(exprs, compiled._flat.n_connections, int(compiled._dtheta.shape[0]), longest)
-
-
-@numba.njit(cache=True)
-def _run_program(ops, iarg, farg, a, b, pv, stack):
-    sp = 0
-    for i in range(a, b):
-        op = ops[i]
-        if op == 0:
-            stack[sp] = farg[i]
-            sp += 1
-        elif op == 1:
-            stack[sp] = pv[iarg[i]]
-            sp += 1
-        elif op == 2:
-            stack[sp - 1] = -stack[sp - 1]
-        else:
-            r = stack[sp - 1]
-            left = stack[sp - 2]
-            sp -= 1
-            if op == 3:
-                v = left + r
-            elif op == 4:
-                v = left - r
-            elif op == 5:
-                v = left * r
-            elif op == 6:
-                v = left / r if r != 0.0 else np.nan  # as the runtime: a failed gain is NaN, the step is refused
-            else:
-                v = math.pow(left, r)  # nan/inf where the language refuses (x^0.5 of x < 0, 0^-1)
-            stack[sp - 1] = v
-    return stack[0]
-
-
-@numba.njit(cache=True)
-def eval_weights(x, wp, conn_val, dval, stack):
-    """Connection values (C,) and d(connection)/d(theta) values (D,) at external theta `x`, in place.
-
-    `wp` is :attr:`WeightProgram.exprs`; `stack` a scratch array of length >= the longest program.
-    Returns True when every value is finite.
-    """
-    (ops, iarg, farg, ptr, weight_expr, weight_free, weight_conn, term_slot, term_free,
-     theta_is_param, theta_idx, pv0, fw0) = wp
-    pv = pv0.copy()
-    fw = fw0.copy()
-    for i in range(x.shape[0]):
-        if theta_is_param[i] == 1:
-            pv[theta_idx[i]] = x[i]
-        else:
-            fw[theta_idx[i]] = x[i]
-    n_terms = term_slot.shape[0]
-    n_coef = ptr.shape[0] - 1 - n_terms
-    cv = np.empty(n_coef)
-    for e in range(n_coef):
-        cv[e] = _run_program(ops, iarg, farg, ptr[e], ptr[e + 1], pv, stack)
-    conn_val[:] = 0.0
-    for j in range(weight_expr.shape[0]):
-        w = cv[weight_expr[j]]
-        if weight_free[j] >= 0:
-            w *= fw[weight_free[j]]
-        conn_val[weight_conn[j]] += w
-    dval[:] = 0.0
-    for i in range(n_terms):
-        v = _run_program(ops, iarg, farg, ptr[n_coef + i], ptr[n_coef + i + 1], pv, stack)
-        if term_free[i] >= 0:
-            v *= fw[term_free[i]]
-        dval[term_slot[i]] += v
-    ok = True
-    for c in range(conn_val.shape[0]):
-        if not math.isfinite(conn_val[c]):
-            ok = False
-    for c in range(dval.shape[0]):
-        if not math.isfinite(dval[c]):
-            ok = False
-    return ok
 
 
 # ------------------------------------------------------------------------------------------ small numerics
@@ -297,6 +174,8 @@ class OnlineState:
     window: win_J (Q, n_out, P); win_c, win_e (Q, n_out); A (P, P) lower triangle; b, u_ref (P,)
     average over the last K LM steps: avg_x (K, P); avg_cost (K,)
     fs (N_FS,) float; its (N_ITS,) int; div_t (capacity,) int: samples of the first divergences
+    replay (window mode; one row in trial mode): win_state, tr_state (Q, ring, N) the state before each row's
+    sample (stored, trial); win_time (Q,) int its sample; e_tr (Q, n_out) the trial's errors
     """
 
     u: np.ndarray
@@ -325,6 +204,10 @@ class OnlineState:
     fs: np.ndarray
     its: np.ndarray
     div_t: np.ndarray
+    win_state: np.ndarray
+    win_time: np.ndarray
+    e_tr: np.ndarray
+    tr_state: np.ndarray
 
     def model(self) -> tuple:
         return (self.u, self.x, self.dxdu, self.conn_val, self.dval, self.a_buf, self.s_buf, self.s_blk)
@@ -335,20 +218,26 @@ class OnlineState:
     def window(self) -> tuple:
         return (self.win_J, self.win_c, self.win_e, self.A, self.b, self.u_ref)
 
+    def replay(self) -> tuple:
+        return (self.win_state, self.win_time, self.e_tr, self.tr_state)
+
     def nbytes(self) -> int:
         """Total bytes of the state arrays."""
         return sum(int(getattr(self, f).nbytes) for f in self.__dataclass_fields__)
 
 
 def new_state(u0: np.ndarray, n_connections: int, n_slots: int, history: np.ndarray, ring: int, window: int,
-              n_outputs: int, average: int, mu0: float, div_capacity: int = 1000) -> OnlineState:
-    """Allocate the state of a run starting at internal parameters `u0` with the network at its history."""
+              n_outputs: int, average: int, mu0: float, div_capacity: int = 1000,
+              replay: bool = False) -> OnlineState:
+    """Allocate the state of a run starting at internal parameters `u0` with the network at its history
+    (`replay`: the stored states of the window mode, else one dummy row)."""
     p = u0.shape[0]
     n = history.shape[0]
     a_buf = np.empty((ring, n))
     a_buf[:] = history
     fs = np.zeros(N_FS)
     fs[F_MU] = mu0
+    rows = window if replay else 1
     return OnlineState(
         u=np.array(u0, dtype=float), x=np.zeros(p), dxdu=np.zeros(p), conn_val=np.zeros(n_connections),
         dval=np.zeros(n_slots), a_buf=a_buf, s_buf=np.zeros((ring, n, p)), s_blk=np.zeros((ring, n, p)),
@@ -358,6 +247,8 @@ def new_state(u0: np.ndarray, n_connections: int, n_slots: int, history: np.ndar
         win_e=np.zeros((window, n_outputs)), A=np.zeros((p, p)), b=np.zeros(p), u_ref=np.array(u0, dtype=float),
         avg_x=np.zeros((average, p)), avg_cost=np.zeros(average),
         fs=fs, its=np.zeros(N_ITS, dtype=np.int64), div_t=np.zeros(div_capacity, dtype=np.int64),
+        win_state=np.zeros((rows, ring, n)), win_time=np.zeros(rows, dtype=np.int64),
+        e_tr=np.zeros((rows, n_outputs)), tr_state=np.zeros((rows, ring, n)),
     )
 
 
@@ -531,8 +422,9 @@ def _lm_step(A, b, u_ref, u, mu, mu_inc, M, L, g, delta, its):
 
 @numba.njit(cache=True)
 def scaled_mu(A, mu0, tau, mu_max):
-    """The first damping scaled to the window: ``min(mu_max, max(mu0, tau * max diag(A)))`` (as fit/lm.py's
-    LMOptions.tau, in the same internal coordinates)."""
+    """The first damping scaled to the window: ``min(mu_max, max(mu0, tau * max diag(A)))``, the rule of
+    fit/lm.py's ``LMOptions.tau`` (Madsen, Nielsen & Tingleff 2004, section 3.2) in the same internal
+    coordinates; `A` holds JᵀJ in its lower triangle."""
     peak = 0.0
     for p in range(A.shape[0]):
         if math.isfinite(A[p, p]):
@@ -598,16 +490,124 @@ def _adopt_trial(stm, stt, bnd, wp, stack):
     a_buf[:, :] = stt[5]
 
 
+# ------------------------------------------------------------------------------------------ window mode
+@numba.njit(cache=True)
+def window_sim(inputs, targets, net, conn, win_state, win_time, its, a_tr, slot_of, e_tr, tr_state,
+               limit=math.inf):
+    """Simulate the window's samples again with the connection values `conn`: a free run from the stored state
+    before the oldest row (a gap left by a skipped row restarts from that row's stored state).
+
+    Writes each row's error to `e_tr` and the state before its sample to `tr_state` (indexed like the rows);
+    `a_tr` ends as the state after the newest sample. Returns 1/2 the sum of the squared errors, inf when the
+    run is not finite or as soon as that cost exceeds `limit` (a refused trial need not be run to its end)."""
+    window = win_time.shape[0]
+    output_index = net[7]
+    count = its[I_COUNT]
+    head = its[I_HEAD]
+    ring = a_tr.shape[0]
+    cost = 0.0
+    prev = -2
+    for i in range(count):
+        q = (head - count + i + window) % window
+        tq = win_time[q]
+        if tq != prev + 1:
+            a_tr[:, :] = win_state[q]
+        tr_state[q] = a_tr
+        _simulate_step(tq, inputs, net, conn, a_tr, slot_of)
+        slot = tq % ring
+        for o in range(output_index.shape[0]):
+            err = targets[tq, o] - a_tr[slot, output_index[o]]
+            e_tr[q, o] = err
+            cost += err * err
+        if not 0.5 * cost <= limit or cost > 1e300:
+            return math.inf
+        prev = tq
+    return 0.5 * cost
+
+
+@numba.njit(cache=True)
+def window_rtrl(inputs, targets, net, stm, wnd, win_state, win_time, its, slot_of, dn, dn2):
+    """Relinearise the window at the model's parameters: simulate its samples again with RTRL (sensitivities
+    zero before the oldest row and after a gap) and replace every row's Jacobian, error and stored state.
+
+    The model ends with the state and sensitivities after the newest sample; the window sums are not touched
+    (call :func:`resync`)."""
+    u, dxdu, conn_val, dval, a_buf, s_buf, s_blk = stm[0], stm[2], stm[3], stm[4], stm[5], stm[6], stm[7]
+    win_J, win_c, win_e = wnd[0], wnd[1], wnd[2]
+    window = win_time.shape[0]
+    output_index = net[7]
+    ring = a_buf.shape[0]
+    count = its[I_COUNT]
+    head = its[I_HEAD]
+    prev = -2
+    for i in range(count):
+        q = (head - count + i + window) % window
+        tq = win_time[q]
+        if tq != prev + 1:
+            a_buf[:, :] = win_state[q]
+            s_buf[:, :, :] = 0.0
+        win_state[q] = a_buf
+        _rtrl_step(tq, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, False, slot_of, dn, dn2)
+        slot = tq % ring
+        for o in range(output_index.shape[0]):
+            r = output_index[o]
+            err = targets[tq, o] - a_buf[slot, r]
+            win_e[q, o] = err
+            win_c[q, o] = err
+            for p in range(u.shape[0]):
+                win_J[q, o, p] = s_buf[slot, r, p] * dxdu[p]
+        prev = tq
+
+
+@numba.njit(cache=True)
+def _window_iteration(inputs, targets, net, wp, bnd, fopt, tries, stm, stt, wnd, rsm, fs, its, stack, slot_of,
+                      M, L, g, delta, dn, dn2):
+    """One LM iteration on the window (module docstring, window mode): up to `tries` trials, each judged by
+    the window cost of a new simulation at the trial; the accepted one is relinearised."""
+    mu_inc, mu_dec, mu_min, mu_max, tau = fopt[0], fopt[1], fopt[2], fopt[3], fopt[4]
+    u, x, dxdu, conn_val, dval = stm[0], stm[1], stm[2], stm[3], stm[4]
+    u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, a_tr = stt[0], stt[1], stt[2], stt[3], stt[4], stt[5]
+    win_J, win_c, win_e, A, b, u_ref = wnd
+    win_state, win_time, e_tr, tr_state = rsm
+    cost_u = 0.5 * max(fs[F_EE], 0.0)  # the rows' errors are those of the run at u (relinearised or new)
+    for _ in range(tries):
+        if its[I_ACCEPTED] + its[I_REJECTED] == 0 and tau > 0.0:
+            fs[F_MU] = scaled_mu(A, fs[F_MU], tau, mu_max)
+        if not _lm_step(A, b, u_ref, u, fs[F_MU], mu_inc, M, L, g, delta, its):
+            break
+        for p in range(u.shape[0]):
+            u_tr[p] = u[p] + delta[p]
+        cost = math.inf
+        if _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack):
+            cost = window_sim(inputs, targets, net, conn_tr, win_state, win_time, its, a_tr, slot_of, e_tr,
+                              tr_state, cost_u)
+        if cost < cost_u:
+            u[:] = u_tr
+            _set(u, x, dxdu, conn_val, dval, bnd, wp, stack)
+            window_rtrl(inputs, targets, net, stm, wnd, win_state, win_time, its, slot_of, dn, dn2)
+            u_ref[:] = u  # the rows are fresh at u: no first-order shift
+            resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its)
+            fs[F_MU] = max(fs[F_MU] * mu_dec, mu_min)
+            its[I_ACCEPTED] += 1
+            break
+        fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
+        its[I_REJECTED] += 1
+    u_tr[:] = u
+    _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)
+
+
 # ------------------------------------------------------------------------------------------ the kernel
 @numba.njit(cache=True)
-def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wnd, avg, fs, its, div_t,
+def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wnd, rsm, avg, fs, its, div_t,
                  rec_x, rec_cost, rec_mu):
     """Advance the quasi-online run over samples ``[t0, t1)`` (global indices into `inputs`/`targets`).
 
     net  = (conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, output_index)
     wp   = :attr:`WeightProgram.exprs`;  bnd = (bound code (P,) int, lower (P,), upper (P,))
-    fopt = [mu_inc, mu_dec, mu_min, mu_max, tau, linearity_tol, mu_floor];  iopt = [start, every, block, record_every, stack size]
+    fopt = [mu_inc, mu_dec, mu_min, mu_max, tau]
+    iopt = [start, every, block, record_every, stack size, tries, min_block]  (tries 0: trial mode)
     stm, stt, wnd = :meth:`OnlineState.model`, ``.trial``, ``.window``;  avg = (avg_x, avg_cost)
+    rsm  = :meth:`OnlineState.replay` (window mode: the state before each row's sample, its time, scratch)
     rec_x (n_rec, P), rec_cost, rec_mu (n_rec,): records at the samples ``t % record_every == 0``.
 
     Returns STATUS_OK, or STATUS_DIVERGED_BEFORE_START when the model diverged at its start parameters.
@@ -617,9 +617,11 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
     win_J, win_c, win_e, A, b, u_ref = wnd
     avg_x, avg_cost = avg
     output_index = net[7]
-    mu_inc, mu_dec, mu_min, mu_max, tau, lin_tol = fopt[0], fopt[1], fopt[2], fopt[3], fopt[4], fopt[5]
-    mu_floor = fopt[6]
+    mu_inc, mu_dec, mu_min, mu_max = fopt[0], fopt[1], fopt[2], fopt[3]
     start, every, block, record_every = iopt[0], iopt[1], iopt[2], iopt[3]
+    tries, min_block = iopt[5], iopt[6]
+    replay = tries > 0
+    win_state, win_time = rsm[0], rsm[1]
     n_theta = u.shape[0]
     n_out = output_index.shape[0]
     ring = a_buf.shape[0]
@@ -635,12 +637,15 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
     g = np.empty(n_theta)
     delta = np.empty(n_theta)
     u_save = np.empty(n_theta)
+    before = np.empty_like(a_buf)
     for t in range(t0, t1):
         active = t >= start
         if t == start:
             _new_block(stm, stt, bnd, wp, stack, fs, its)
         slot = t % ring
-        _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, active, slot_of, dn, dn2)
+        if replay:
+            before[:, :] = a_buf
+        _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, active and not replay, slot_of, dn, dn2)
         sq = 0.0
         jj = 0.0
         for o in range(n_out):
@@ -655,7 +660,9 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
         trial_ok = True
         nl = 0.0
         ch = 0.0
-        if active:
+        if active and replay:
+            trial_ok = False  # no trial runs alongside: a diverged model restarts from the history
+        elif active:
             _simulate_step(t, inputs, net, conn_tr, a_tr, slot_of)
             st = 0.0
             for o in range(n_out):
@@ -680,6 +687,22 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
             s_buf[:, :, :] = 0.0
             fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
             _new_block(stm, stt, bnd, wp, stack, fs, its)
+        elif replay:
+            h = its[I_HEAD]
+            _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its)
+            win_state[h] = before
+            win_time[h] = t
+            if active:
+                its[I_BLOCK_POS] += 1
+                # an iteration costs in proportion to the rows: iterate more often while the window fills
+                if its[I_BLOCK_POS] >= max(min_block, (block * its[I_COUNT]) // window):
+                    its[I_BLOCK_POS] = 0
+                    _window_iteration(inputs, targets, net, wp, bnd, fopt, tries, stm, stt, wnd, rsm, fs, its,
+                                      stack, slot_of, M, L, g, delta, dn, dn2)
+                k = its[I_STEPS] % avg_x.shape[0]  # window mode: every sample from `start` is a step
+                avg_x[k, :] = x
+                avg_cost[k] = 0.5 * max(fs[F_EE], 0.0)
+                its[I_STEPS] += 1
         else:
             _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its)
             if active and not trial_ok:
@@ -692,7 +715,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
                 fs[F_NL] += nl
                 its[I_BLOCK_POS] += 1
                 if its[I_BLOCK_POS] >= block:
-                    if fs[F_NL] <= lin_tol * fs[F_CH]:
+                    if fs[F_NL] <= LINEARITY_TOL * fs[F_CH]:
                         _adopt_trial(stm, stt, bnd, wp, stack)
                         fs[F_MU] = max(fs[F_MU] * mu_dec, mu_min)
                         its[I_ACCEPTED] += 1
@@ -701,12 +724,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
                         its[I_REJECTED] += 1
                     _new_block(stm, stt, bnd, wp, stack, fs, its)
                 if (t - start) % every == 0:
-                    if its[I_STEPS] == 0 and tau > 0.0:
-                        fs[F_MU] = scaled_mu(A, fs[F_MU], tau, mu_max)
-                    mu_step = fs[F_MU]
-                    if mu_floor > 0.0:
-                        mu_step = max(mu_step, scaled_mu(A, 0.0, mu_floor, mu_max))
-                    if _lm_step(A, b, u_ref, u, mu_step, mu_inc, M, L, g, delta, its):
+                    if _lm_step(A, b, u_ref, u, fs[F_MU], mu_inc, M, L, g, delta, its):
                         u_save[:] = u_tr
                         for p in range(n_theta):
                             u_tr[p] = u[p] + delta[p]
