@@ -14,6 +14,7 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from feedback_neuron import feedback_neuron, hand_run
 
 from flowchart2sdnn.compiler import compile_file
 from flowchart2sdnn.data.excitation import ExcitationSettings, excite
@@ -22,47 +23,17 @@ from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.fit.online import OnlineOptions, OnlineRun, quasi_online
 from flowchart2sdnn.fit.transforms import Bounds
 from flowchart2sdnn.network import online_kernel as ok
-from flowchart2sdnn.network.model import WeightSpec
-from flowchart2sdnn.network.randomnet import hand_network, random_gdnn
+from flowchart2sdnn.network.randomnet import random_gdnn
 from flowchart2sdnn.network.runtime import CompiledNetwork
 
 ROOT = Path(__file__).resolve().parent.parent
-
-
-def feedback_neuron(w0=0.3, k0=0.5):
-    """y(t) = w y(t-1) + k u(t): one linear neuron, a free weight w and a parameter k."""
-    net = hand_network(
-        layers=[("y", "linear")],
-        weights=[
-            WeightSpec("LW", 0, 0, source=0, delay=1, coef="1", free="w"),
-            WeightSpec("IW", 0, 0, source=0, delay=0, coef="k"),
-        ],
-        outputs=[("y", 0)],
-        parameters={"k": k0},
-        free_weights={"w": w0},
-    )
-    return CompiledNetwork(net)
-
-
-def hand_simulation(w, k, u):
-    """Outputs and dy/dk, dy/dw by the recursion S(t) = d/dtheta [w y(t-1) + k u(t)]."""
-    y = np.zeros(u.size)
-    dk = np.zeros(u.size)
-    dw = np.zeros(u.size)
-    prev = prev_k = prev_w = 0.0
-    for t in range(u.size):
-        y[t] = w * prev + k * u[t]
-        dk[t] = u[t] + w * prev_k
-        dw[t] = prev + w * prev_w
-        prev, prev_k, prev_w = y[t], dk[t], dw[t]
-    return y, dk, dw
 
 
 def test_first_lm_step_equals_the_hand_computation():
     rng = np.random.default_rng(1)
     n = 40
     u = rng.uniform(-1, 1, n)
-    target = hand_simulation(0.6, 0.8, u)[0] + 0.01 * rng.standard_normal(n)
+    target = hand_run(0.8, 0.6, u)[0] + 0.01 * rng.standard_normal(n)
     cn = feedback_neuron()
     assert cn.names == ("k", "w")
     lo_k, mu0 = 0.1, 0.05
@@ -72,7 +43,7 @@ def test_first_lm_step_equals_the_hand_computation():
     assert run.advance(n)
 
     # by hand: rows from the recursion, the min-only transform x = lo - 1 + sqrt(u^2 + 1), eq. (11)
-    y, dk, dw = hand_simulation(0.3, 0.5, u)
+    y, dk, dw = hand_run(0.5, 0.3, u)
     e = target - y
     uk = math.sqrt((0.5 - lo_k + 1.0) ** 2 - 1.0)
     Ju = np.column_stack([dk * uk / math.sqrt(uk * uk + 1.0), dw])
@@ -206,7 +177,7 @@ def test_divergence_is_recovered_and_never_yields_nan():
     cn = feedback_neuron(w0=1.5, k0=1.0)  # unstable: |y| grows like 1.5^t and overflows near t = 1750
     rng = np.random.default_rng(2)
     u = rng.uniform(-1, 1, 6000)
-    y = hand_simulation(0.5, 1.0, u)[0]
+    y = hand_run(1.0, 0.5, u)[0]
     frozen = OnlineOptions(window=500, start=0, block=10**6, mu0=1e10, mu_min=1e10, mu_max=1e10, average=50)
     res = quasi_online(cn, u[:, None], y[:, None], options=frozen)
     assert res.diverged >= 1 and res.status == "completed"
@@ -224,7 +195,7 @@ def test_noise_free_data_of_the_model_class_are_fitted_exactly():
     # are refused until mu is large enough, then the fit reaches the truth to rounding level
     cn = feedback_neuron(w0=0.2, k0=1.0)
     u = np.random.default_rng(4).uniform(-1, 1, 20000)
-    y = hand_simulation(0.95, 1.0, u)[0]
+    y = hand_run(1.0, 0.95, u)[0]
     res = quasi_online(cn, u[:, None], y[:, None],
                        options=OnlineOptions(window=2000, start=200, block=300, average=2000, mu0=1e-6))
     assert res.status == "completed" and res.rejected_blocks > 0 and res.accepted_blocks > 0

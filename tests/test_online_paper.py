@@ -7,33 +7,19 @@ curve error, the acceptance limits). The paper met its targets quasi-online from
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
-from pathlib import Path
 
 import pytest
+from paper_example import paper_example
 
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.identify.chartio import fix_from_result, with_values
 from flowchart2sdnn.identify.run import IdentifySettings, identify
 
-REPO = Path(__file__).resolve().parents[1]
-
-
-def _example():
-    name = "paper_experiment_example"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, REPO / "examples" / "paper_experiment.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
-
 
 @pytest.mark.slow
 def test_quasi_online_meets_the_acceptance_from_three_of_four_starts(tmp_path):
-    ex = _example()
+    ex = paper_example()
     paths = ex.make_data(tmp_path, 100.0)
     plant = load_diagram(ex.CHARTS / "plant.yaml")
     truth = ex.truth_values(plant)

@@ -6,13 +6,12 @@ differences), a reduced run on 20 s records by default, and the full 100 s run (
 
 from __future__ import annotations
 
-import importlib.util
 import json
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from paper_example import paper_example
 
 from flowchart2sdnn.analysis.lint import lint_diagram
 from flowchart2sdnn.data.continuous import simulate_continuous
@@ -20,17 +19,6 @@ from flowchart2sdnn.diagram.validate import load_diagram
 
 REPO = Path(__file__).resolve().parents[1]
 CHARTS = REPO / "diagrams" / "paper"
-
-
-def _example():
-    """examples/paper_experiment.py as a module (registered first: its dataclasses look themselves up)."""
-    name = "paper_experiment_example"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, REPO / "examples" / "paper_experiment.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
 
 
 # ----------------------------------------------------------------------------------------------- charts
@@ -62,7 +50,7 @@ def test_charts_carry_the_papers_numbers():
 
 def test_true_friction_is_the_plant_charts_friction():
     """The scored truth equals the friction signals MR1, MR2 the continuous simulator computes from the chart."""
-    pe = _example()
+    pe = paper_example()
     plant = load_diagram(CHARTS / "plant.yaml")
     t = np.arange(3000) * plant.sample_time
     u = 6.0 * np.sign(np.sin(2 * np.pi * 0.7 * t)) + 2.0  # both machines turn both ways
@@ -74,7 +62,7 @@ def test_true_friction_is_the_plant_charts_friction():
 
 
 def test_curve_error_against_a_closed_form():
-    pe = _example()
+    pe = paper_example()
     truth = lambda w: 0.5 * np.tanh(2.0 * w) + 0.1 * np.sign(w)  # noqa: E731 - a jump of 0.2 at zero
     weights = {"a": [2.0], "v": [0.5]}
     rms, peak = pe.curve_error(weights, truth, np.array([-3.0, 1.0, 2.0]), band=0.05)
@@ -87,7 +75,7 @@ def test_curve_error_against_a_closed_form():
 
 
 def test_acceptance_limits():
-    pe = _example()
+    pe = paper_example()
     truth = {"J1": 0.2, "J2": 0.4, "c": 500.0, "d": 0.25}
     run = pe.Run(2, "offline", 1, {}, values={"J2": 0.4 * 1.019, "c": 500 * 0.981, "d": 0.25 * 1.09},
                  curve_rms=4.9)
@@ -128,7 +116,7 @@ def _check_runs(pe, runs, out_dir: Path, rows: int) -> None:
 def test_reduced_experiment_on_20_s_records(tmp_path):
     """The staged recipe on 20 s records: both stages pass with the multi-start; a failed single start shows
     in its cost."""
-    pe = _example()
+    pe = paper_example()
     runs = pe.experiment(tmp_path, seconds=20.0, starts=16, engine_starts=1, modes=(pe.STAGED_MODE,),
                          log=lambda s: None)
     _check_runs(pe, runs, tmp_path, rows=19999)
@@ -137,7 +125,7 @@ def test_reduced_experiment_on_20_s_records(tmp_path):
 @pytest.mark.slow
 def test_full_experiment(tmp_path, capsys):
     """The paper's setting: 100 s records, offline and quasi-online, the script's defaults and exit code."""
-    pe = _example()
+    pe = paper_example()
     assert pe.main(["--out", str(tmp_path)]) == 0
     printed = capsys.readouterr().out
     assert "**Table 1**" in printed and "**Table 2**" in printed
