@@ -188,10 +188,8 @@ def fit_stacked(diagram: Diagram, records: Mapping[str, Dataset], train: Sequenc
         radius = rest_radius(first, x)
         return None if radius <= REST_LIMIT else f"the network is unstable at rest (eigenvalue modulus {radius:.3g})"
 
-    params = {p.name: p for p in network.parameters}
     names = first.names
-    lower = [params[n].min if n in params and params[n].min is not None else -np.inf for n in names]
-    upper = [params[n].max if n in params and params[n].max is not None else np.inf for n in names]
+    lower, upper = first.bounds()
     lm = levenberg_marquardt(fun, first.compiled.theta0(), names, lower, upper, LMOptions(max_iter=max_iter),
                              guard=guard, residual=residual)
     cov = covariance(lm.jac, lm.residual, names=names)

@@ -143,13 +143,6 @@ def _initial_curves(chart: Diagram, seed: int) -> dict[str, dict]:
     return {k: {"a": w["a"], "v": w["v"], **({"b": w["b"]} if w["b"] else {})} for k, w in curves.items()}
 
 
-def _bounds(problem: Problem) -> tuple[np.ndarray, np.ndarray]:
-    params = {p.name: p for p in problem.network.parameters}
-    lo = [params[n].min if n in params and params[n].min is not None else -np.inf for n in problem.names]
-    hi = [params[n].max if n in params and params[n].max is not None else np.inf for n in problem.names]
-    return np.array(lo, dtype=float), np.array(hi, dtype=float)
-
-
 def lm_step(chart: Diagram, data: Dataset, starts: int = 1, seed: int = 0, max_iter: int = 60,
             tau: float = TAU):
     """LM (multi-start when `starts` > 1) on `data` from the chart's values; (problem, MultiStartResult).
@@ -159,7 +152,7 @@ def lm_step(chart: Diagram, data: Dataset, starts: int = 1, seed: int = 0, max_i
     """
     problem = build_problem(chart, data, "zoh", seed)
     names = problem.names
-    lower, upper = _bounds(problem)
+    lower, upper = problem.bounds()
     rows = draw_starts(names, problem.compiled.theta0(), lower, upper, starts, seed)
     options = LMOptions(max_iter=max_iter, tau=tau, min_rel_cost_change=1e-10)
 

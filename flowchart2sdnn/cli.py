@@ -53,6 +53,18 @@ def handle_errors(func):
     return wrapper
 
 
+def executor_options(work: str):
+    """`--workers N` and `--scheduler ADDRESS` (see flowchart2sdnn.parallel.make_executor), worded for `work`."""
+
+    def decorate(func):
+        func = click.option("--scheduler", metavar="ADDRESS",
+                            help=f"Run {work} on a Dask cluster (tcp://host:8786, or 'local').")(func)
+        return click.option("--workers", type=click.IntRange(min=1),
+                            help=f"Run {work} in N local worker processes.")(func)
+
+    return decorate
+
+
 @click.group(context_settings={"help_option_names": ["-h", "--help"]})
 @click.version_option(__version__, prog_name="sdnn")
 def main() -> None:

@@ -12,7 +12,6 @@ from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.fit.transforms import Bounds
 from flowchart2sdnn.identify.problem import CHATTER_LIMIT, GROWTH_LIMIT, build_problem
-from flowchart2sdnn.identify.run import _bounds
 
 CHARTS = Path(__file__).resolve().parents[1] / "diagrams" / "paper"
 
@@ -32,7 +31,7 @@ def test_first_mu_is_tau_times_the_largest_diagonal_of_the_internal_normal_matri
     internal coordinates u (bounds by transform); never below the fixed mu0."""
     problem = _engine_problem()
     x = problem.compiled.theta0()
-    lower, upper = _bounds(problem)
+    lower, upper = problem.bounds()
     bounds = Bounds.make(problem.names, lower, upper)
     u = bounds.start(x)
     cols = []

@@ -75,7 +75,7 @@ class BatchBar:
 
 
 def register(main: click.Group) -> None:
-    from ..cli import handle_errors
+    from ..cli import executor_options, handle_errors
 
     @main.command()
     @click.argument("chart", type=click.Path(dir_okay=False))
@@ -84,8 +84,7 @@ def register(main: click.Group) -> None:
                   help="Results table: .csv (appended after each file) or .parquet (needs pyarrow).")
     @click.option("--fix-from", type=click.Path(dir_okay=False),
                   help="Fix parameters and nonlinear blocks with matching names from an earlier RESULT.json.")
-    @click.option("--workers", type=click.IntRange(min=1), help="Identify N files at a time in local processes.")
-    @click.option("--scheduler", metavar="ADDRESS", help="Run on a Dask cluster (tcp://host:8786, or 'local').")
+    @executor_options("the files' identifications")
     @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
                   help="Multi-start per file (seeded starts, the first is the chart's init).")
     @click.option("--seed", type=int, default=0, show_default=True)

@@ -41,7 +41,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 
 
 def register(main: click.Group) -> None:
-    from ..cli import handle_errors
+    from ..cli import executor_options, handle_errors
 
     @main.command()
     @click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
@@ -86,10 +86,7 @@ def register(main: click.Group) -> None:
     @click.option("--seed", type=int, default=0, show_default=True, help="Seed for initial curves.")
     @click.option("--force", is_flag=True, help="Overwrite existing output files.")
     @click.option("--quiet", is_flag=True, help="No progress and no report text.")
-    @click.option("--workers", type=click.IntRange(min=1),
-                  help="Run the candidate refits in N local worker processes.")
-    @click.option("--scheduler", metavar="ADDRESS",
-                  help="Run the candidate refits on a Dask cluster (tcp://host:8786, or 'local').")
+    @executor_options("the candidate refits")
     @handle_errors
     def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
                  refit_iter, max_iter, top, criterion, min_gain, alpha, dead_time_max, harmonics, alignment,

@@ -78,7 +78,7 @@ class Progress:
 
 
 def register(main: click.Group) -> None:
-    from ..cli import handle_errors
+    from ..cli import executor_options, handle_errors
 
     @main.command()
     @click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
@@ -108,10 +108,7 @@ def register(main: click.Group) -> None:
                        "Needs matplotlib: pip install flowchart2sdnn[plots].")
     @click.option("--force", is_flag=True, help="Overwrite existing output files.")
     @click.option("--quiet", is_flag=True, help="No progress and no table.")
-    @click.option("--workers", type=click.IntRange(min=1),
-                  help="Run the multi-start fits in N local worker processes.")
-    @click.option("--scheduler", metavar="ADDRESS",
-                  help="Run the multi-start fits on a Dask cluster (tcp://host:8786, or 'local').")
+    @executor_options("the multi-start fits")
     @handle_errors
     def identify(data, chart, output, fix_from, validation, split, starts, seed, online, window, average,
                  max_iter, alignment, mapping, plots, force, quiet, workers=None, scheduler=None) -> None:

@@ -117,6 +117,17 @@ class Problem:
         params, free = self.compiled.values(x)
         return rest_radii(self.network, self.network.weight_values(params, free))
 
+    def bounds(self) -> tuple[np.ndarray, np.ndarray]:
+        """(lower, upper) of the free quantities: the parameters' min and max, unbounded where none is given
+        (and for learned weights)."""
+        params = {p.name: p for p in self.network.parameters}
+        lo, hi = [], []
+        for name in self.names:
+            p = params.get(name)
+            lo.append(-np.inf if p is None or p.min is None else p.min)
+            hi.append(np.inf if p is None or p.max is None else p.max)
+        return np.array(lo, dtype=float), np.array(hi, dtype=float)
+
     def from_start(self, x: np.ndarray) -> Problem:
         """This problem with the stability floor raised to what the start `x` itself has.
 

@@ -75,16 +75,6 @@ class Identification:
     online: object | None = None
 
 
-def _bounds(problem: Problem) -> tuple[np.ndarray, np.ndarray]:
-    lo, hi = [], []
-    params = {p.name: p for p in problem.network.parameters}
-    for name in problem.names:
-        p = params.get(name)
-        lo.append(-np.inf if p is None or p.min is None else p.min)
-        hi.append(np.inf if p is None or p.max is None else p.max)
-    return np.array(lo, dtype=float), np.array(hi, dtype=float)
-
-
 def _nonlinear_weights(problem: Problem, x: np.ndarray) -> dict[str, dict]:
     _, free = problem.compiled.values(x)
     out: dict[str, dict] = {}
@@ -129,7 +119,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     names = problem.names
     x0 = problem.compiled.theta0()
     problem, warnings = _start_stability(problem, x0)
-    lower, upper = _bounds(problem)
+    lower, upper = problem.bounds()
     warnings += _on_bound_warnings(names, x0, lower, upper)
     lm_result: LMResult | None = None
     online_result = None
