@@ -9,8 +9,8 @@ from diagnose_bench import chart, record
 
 from flowchart2sdnn.diagnose.cli import _json_safe
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
-from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
-from flowchart2sdnn.parallel import DaskExecutor, ProcessExecutor
+from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose, refit_unit
+from flowchart2sdnn.parallel import DaskExecutor, ProcessExecutor, SerialExecutor
 
 EXCITATION = {"amplitude": (-6.0, 6.0), "relay_level": 3.0, "relay_switch": 1.0, "relay_band": 0.2}
 EFFECTS = [BUILTIN_EFFECTS[n] for n in ("friction", "damping", "saturation")]
@@ -35,6 +35,29 @@ def test_serial_run_refits_several_candidates_and_accepts_friction(case):
     assert sum(1 for c in report["candidates"] if c.get("refitted")) >= 2  # something for the workers to share
     assert [a["effect"] for a in report["accepted"]] == ["friction"]
     assert len(report["timing"]["refit"]) == sum(1 for c in report["candidates"] if c.get("refitted"))
+
+
+class _Recording(SerialExecutor):
+    """A serial executor that records what it is asked to run."""
+
+    def __init__(self):
+        self.calls = []
+
+    def map(self, fn, items):
+        items = list(items)
+        self.calls.append((fn, len(items)))
+        return super().map(fn, items)
+
+
+def test_the_refits_go_through_the_executor(case):
+    """Every brief refit is a work unit handed to the executor: two per refitted candidate (from the current
+    fit and from the chart as given), one map per round."""
+    ex = _Recording()
+    par = diagnose(chart("one_mass"), case["train"], [case["val"]], SETTINGS, EFFECTS, executor=ex)
+    refitted = sum(1 for c in par.report["candidates"] if c.get("refitted"))
+    assert [fn for fn, _ in ex.calls] == [refit_unit] * SETTINGS.rounds
+    assert sum(n for _, n in ex.calls) == 2 * refitted
+    assert _without_timing(par.report) == _without_timing(case["serial"].report)
 
 
 def test_local_processes_give_the_same_report(case):
