@@ -42,7 +42,7 @@ from typing import Any
 import numpy as np
 
 from .errors import SdnnError
-from .fit.lm import LMOptions, LMResult, levenberg_marquardt
+from .fit.lm import LMResult, levenberg_marquardt
 
 __all__ = [
     "Executor",
@@ -54,6 +54,7 @@ __all__ = [
     "FitTask",
     "fit_task",
     "fit_start",
+    "online_start",
     "DASK_HINT",
 ]
 
@@ -324,7 +325,7 @@ class FitTask:
                             alignment, the guard's stability floor, further records, ...), as identify built it
     names : tuple of str    theta order (checked against the rebuilt network)
     lower, upper : ndarray (P,) bounds
-    options : LMOptions
+    options : LMOptions (fit_start) or OnlineOptions (online_start)
     key : str               sha256 of the network file and the problem fields: the worker's cache key
                             (bounds and options are not cached, they travel with every unit)
     """
@@ -334,11 +335,11 @@ class FitTask:
     names: tuple[str, ...]
     lower: np.ndarray
     upper: np.ndarray
-    options: LMOptions
+    options: Any  # LMOptions or fit.online.OnlineOptions
     key: str
 
 
-def fit_task(problem, lower: np.ndarray, upper: np.ndarray, options: LMOptions) -> FitTask:
+def fit_task(problem, lower: np.ndarray, upper: np.ndarray, options: Any) -> FitTask:
     """The work unit of a multi-start fit of ``problem`` (an identify.problem.Problem).
 
     Every field of the Problem but the chart and the compiled network travels as it is, so that the worker's
@@ -395,3 +396,17 @@ def fit_start(task: FitTask, start: np.ndarray) -> LMResult:
     problem = _problem(task).from_start(start)
     return levenberg_marquardt(problem.fun, np.asarray(start, dtype=float), task.names, task.lower, task.upper,
                                task.options, guard=problem.guard, residual=problem.residual)
+
+
+def online_start(task: FitTask, start: np.ndarray):
+    """Quasi-online identification from ``start`` on the task's problem (``task.options`` an OnlineOptions).
+
+    Returns
+    -------
+    flowchart2sdnn.fit.online.OnlineStart
+    """
+    from .fit.online import OnlineStart, quasi_online
+
+    problem = _problem(task)
+    return OnlineStart(quasi_online(problem.compiled, problem.inputs, problem.targets, np.asarray(start, dtype=float),
+                                    task.lower, task.upper, task.options, init=problem.init))

@@ -32,7 +32,7 @@ from ..network import online_kernel as ok
 from ..network.runtime import CompiledNetwork
 from .transforms import Bounds
 
-__all__ = ["OnlineOptions", "OnlineResult", "OnlineRun", "quasi_online", "STATUS_MESSAGES"]
+__all__ = ["OnlineOptions", "OnlineResult", "OnlineRun", "OnlineStart", "quasi_online", "STATUS_MESSAGES"]
 
 #: Status code -> message; ``OnlineResult.message`` starts with one of these.
 STATUS_MESSAGES: dict[str, str] = {
@@ -153,6 +153,41 @@ class OnlineResult:
     chol_fallbacks: int
     skipped_steps: int
     mu_final: float
+
+
+@dataclass(frozen=True, eq=False)
+class OnlineStart:
+    """One quasi-online run of a multi-start, seen as :func:`~flowchart2sdnn.fit.multistart.run_multistart`
+    compares runs: its cost is the mean window cost over the last K steps (the paper's error of a run, known
+    online at the end of the record), its point the averaged estimate.
+    """
+
+    result: OnlineResult
+
+    @property
+    def cost(self) -> float:
+        return math.inf if self.result.status == "diverged_at_start" else float(self.result.mean_cost)
+
+    @property
+    def x(self) -> np.ndarray:
+        return self.result.theta_mean
+
+    @property
+    def names(self) -> tuple[str, ...]:
+        return self.result.names
+
+    @property
+    def status(self) -> str:
+        return self.result.status
+
+    @property
+    def interrupted(self) -> bool:
+        return self.result.status in ("interrupted", "callback_stop")
+
+    @property
+    def cost_history(self) -> tuple[float, ...]:
+        # the scale below which costs count as an exact fit: the largest window cost of the run
+        return (float(self.result.cost.max()),) if self.result.cost.size else ()
 
 
 def _readonly(a) -> np.ndarray:

@@ -91,7 +91,8 @@ def register(main: click.Group) -> None:
     @click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
                   help="Train on this leading fraction of DATA, validate on the rest.")
     @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
-                  help="Multi-start: number of seeded starts (the first is the chart's init).")
+                  help="Multi-start: number of seeded starts (the first is the chart's init); with --online, that many "
+                       "quasi-online runs, the one with the lowest final window cost reported.")
     @click.option("--seed", type=int, default=0, show_default=True, help="Seed for starts and initial curves.")
     @click.option("--online", is_flag=True, help="Quasi-online LM over a sliding window (paper section 3.1).")
     @click.option("--window", type=click.IntRange(min=2), default=25000, show_default=True,
