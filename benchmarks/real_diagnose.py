@@ -11,6 +11,11 @@ force (viscous term plus learned curve or the physical `coulomb` terms) is least
 Fv*v + Fc*sign(v) + offset (and per direction) over the speed range of the data, to compare with the
 published IDIM-LS values. `emps_spread` refits the diagnosed chart on other stretches (halves of train, the
 test record itself as an oracle) to show how much the test RMSE depends on the friction of the stretch.
+`emps_record_difference` measures, without any model, how much more force the test record needs than the
+training record at the same speed (both follow the same trajectory to 0.09 mm, so the difference of their
+forces is the difference of their friction), and `emps_friction_scale` how the test RMSE of the diagnosed
+chart moves when all its friction is scaled by 1 + d: together they show that the test RMSE is set by a
+friction level 1-2 % above train's, which nothing fitted on train alone can know.
 
 UWaterloo MTE 360 flexible drive: the chart without Coulomb friction (diagrams/real/flexible_drive_linear.yaml),
 trained on square_2V, validated on square_1p5V; fit % before and after on every record of the folder.
@@ -143,6 +148,67 @@ def emps_spread(diagram, train, test) -> None:
               f"{c['Fv+']:.1f} | {c['Fv-']:.1f} | {c['Fc+']:.2f} | {c['Fc-']:.2f} |")
 
 
+def record_difference(v: np.ndarray, force_a: np.ndarray, force_b: np.ndarray, edges: np.ndarray,
+                      bins: np.ndarray, guard: int = 100) -> np.ndarray:
+    """Mean of force_b - force_a per speed bin, over the samples at least `guard` samples after every edge.
+
+    For two records that follow the same trajectory (same speed and acceleration at every sample), this is
+    the difference of the force the plant needed, i.e. of its friction, at that speed; samples shortly after
+    an edge of the test record's pulses (its controller's transients) are left out. NaN for an empty bin.
+    """
+    since = np.full(len(v), np.iinfo(np.int64).max)
+    for k in np.sort(edges):
+        idx = np.arange(k, len(v))
+        since[idx] = np.minimum(since[idx], idx - k)
+    keep = since >= guard
+    d = force_b - force_a
+    out = np.full(len(bins) - 1, np.nan)
+    for i, (lo, hi) in enumerate(zip(bins[:-1], bins[1:], strict=True)):
+        m = keep & (v >= lo) & (v < hi)
+        if m.any():
+            out[i] = float(d[m].mean())
+    return out
+
+
+def emps_record_difference(train, test) -> None:
+    """Model-free: the extra force the test record needs over the training record at the same speed."""
+    q_a, q_b = train.columns["q"], test.columns["q"]
+    print(f"EMPS test vs train, same trajectory: q_test - q_train = {1000 * np.sqrt(np.mean((q_b - q_a) ** 2)):.3f} "
+          "mm rms; F_test - F_train (N) per speed bin, >= 100 ms after every pulse edge:")
+    v = np.gradient(q_a, 0.001)
+    edges = np.flatnonzero(np.abs(np.diff(test.columns["F"])) > 100.0) + 1
+    bins = np.array([-0.14, -0.10, -0.06, -0.02, -0.005, 0.005, 0.02, 0.06, 0.10, 0.14])
+    diff = record_difference(v, train.columns["F"], test.columns["F"], edges, bins)
+    ranges = (f"{lo:+.3f}..{hi:+.3f}" for lo, hi in zip(bins[:-1], bins[1:], strict=True))
+    print("  | v [m/s] | " + " | ".join(ranges) + " |")
+    print("  | F_test - F_train [N] | " + " | ".join(f"{x:+.2f}" for x in diff) + " |")
+
+
+def with_parameters(diagram, values: dict):
+    """The chart with the given parameters' values (their `init`) replaced."""
+    return dataclasses.replace(diagram, parameters=tuple(
+        dataclasses.replace(p, init=values[p.name]) if p.name in values else p for p in diagram.parameters))
+
+
+def emps_friction_scale(diagram, train, test, scales=(-0.02, -0.01, 0.0, 0.01, 0.02, 0.03)) -> None:
+    """Test and train RMSE of the chart refitted on all of train, with all its friction scaled by 1 + d.
+
+    Friction parameters: the viscous Fv and the `coulomb` option's Fc_*, c_*, dFv_* (a learned friction
+    curve is not scaled).
+    """
+    fit = identify(with_initial_speed(diagram, train), train, None, IdentifySettings(max_iter=150))
+    values = {k: v["value"] for k, v in fit.result["parameters"].items()}
+    friction = [k for k in values if k == "Fv" or k.split("_")[0] in ("Fc", "c", "dFv")]
+    print("  | friction x (1 + d), d = | " + " | ".join(f"{d:+.0%}" for d in scales) + " |")
+    rows = {"test RMSE [mm]": [], "train RMSE [mm]": []}
+    for d in scales:
+        chart = with_parameters(fit.diagram, {k: values[k] * (1 + d) for k in friction})
+        rows["test RMSE [mm]"].append(emps_test_rmse_mm(chart, test))
+        rows["train RMSE [mm]"].append(emps_test_rmse_mm(chart, train))
+    for name, xs in rows.items():
+        print(f"  | {name} | " + " | ".join(f"{x:.2f}" for x in xs) + " |")
+
+
 def flexible() -> None:
     folder = REAL / "uwaterloo_mte360_flexible_drive"
     maps = {"u": "u_V", "v1": "v1_cart1_mm_s", "v2": "v2_cart2_mm_s"}
@@ -183,5 +249,8 @@ if __name__ == "__main__":
         tr, te = (read_csv(REAL / "emps" / f, ["F", "q"], maps, 0.001) for f in ("train.csv", "test.csv"))
         print("EMPS, the chart after diagnose --rounds 1 refitted on other stretches:")
         emps_spread(d1.final.diagram, tr, te)
+        emps_record_difference(tr, te)
+        print("EMPS, the chart after diagnose --rounds 1 refitted on all of train, its friction scaled:")
+        emps_friction_scale(d1.final.diagram, tr, te)
     if "flexible" in which:
         flexible()

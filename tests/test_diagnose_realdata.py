@@ -76,3 +76,38 @@ def test_flexible_drive_friction_is_found_and_validation_fit_rises():
     by_hand = 100 * (1 - math.sqrt(len(y)) * rms / np.linalg.norm(y - y.mean()))
     assert fit["v1"] == pytest.approx(by_hand, abs=1e-6)
     assert fit["v1"] > before["v1"] + 8 and fit["v2"] > before["v2"] + 8
+
+
+def test_record_difference_is_the_mean_force_difference_per_speed_bin_away_from_edges():
+    # two records on the same trajectory: b needs +1 N forwards and -2 N backwards more than a, and has
+    # +-100 N transients during the 10 samples after each edge, which must be left out
+    rng = np.random.default_rng(5)
+    v = 0.12 * np.sin(np.linspace(0, 12 * np.pi, 6000))
+    force_a = 30 * np.sign(v) + 200 * v + rng.normal(0, 1, v.size)
+    force_b = force_a + np.where(v >= 0, 1.0, -2.0)
+    edges = np.arange(250, 6000, 500)
+    for k in edges:
+        force_b[k:k + 10] += 100.0 * (-1) ** (k // 500)
+    bins = np.array([-0.2, -0.05, 0.0, 0.05, 0.2])
+    diff = real.record_difference(v, force_a, force_b, edges, bins, guard=10)
+    assert diff == pytest.approx([-2.0, -2.0, 1.0, 1.0], abs=1e-12)
+    # without the guard the transients enter the means
+    assert not np.allclose(real.record_difference(v, force_a, force_b, edges, bins, guard=0), diff)
+    assert np.isnan(real.record_difference(v, force_a, force_b, edges, np.array([0.3, 0.4]), guard=10)[0])
+
+
+def test_emps_test_record_needs_more_force_against_the_motion_than_train():
+    # both records follow the same trajectory (the controller cancels the pulses), so the difference of their
+    # forces at the same speed is the difference of their friction: test's is higher in both directions
+    maps = {"F": "force_N", "q": "q_meas_m"}
+    train = read_csv(REAL / "emps" / "train.csv", ["F", "q"], maps, 0.001)
+    test = read_csv(REAL / "emps" / "test.csv", ["F", "q"], maps, 0.001)
+    assert np.sqrt(np.mean((test.columns["q"] - train.columns["q"]) ** 2)) < 2e-4
+    v = np.gradient(train.columns["q"], 0.001)
+    edges = np.flatnonzero(np.abs(np.diff(test.columns["F"])) > 100.0) + 1
+    assert len(edges) == 49  # SOURCE.md: 49 pulse edges
+    bins = np.array([-0.14, -0.10, -0.06, -0.02, 0.02, 0.06, 0.10, 0.14])
+    diff = real.record_difference(v, train.columns["F"], test.columns["F"], edges, bins)
+    backwards, forwards = diff[:3], diff[4:]
+    assert np.all(backwards < -0.3) and np.all(backwards > -2.0)
+    assert np.all(forwards > 0.3) and np.all(forwards < 2.0)
