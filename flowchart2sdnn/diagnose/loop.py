@@ -5,13 +5,17 @@ One round:
 1. the current chart is fitted (round 1: the chart as given);
 2. every effect of the library at every place and option is scored by the score test (:mod:`.score`);
 3. the best ``top`` places whose score is significant are refitted briefly (``refit_iter`` LM iterations),
-   each twice - from the current fit with the effect added at neutral values, and from the chart as given
-   with every accepted effect and this one added at neutral values (a refit only from the previous fit gets
-   stuck where the previous fit bent its parameters to imitate the missing effect) - keeping the better;
+   from the current fit with the effect added at neutral values, and from the chart as given with every
+   accepted effect and this one added at neutral values (a refit only from the previous fit gets stuck where
+   the previous fit bent its parameters to imitate the missing effect); a candidate that is not neutral (a
+   scanned gap, clip or delay) from the chart as given twice, on the whole records at once and with a growing
+   horizon (``horizon`` samples of each record first, then 4x longer leading parts, then the whole records:
+   on a chaotic drive a fit over whole records from far away stops in a local minimum) - keeping the lowest
+   training cost;
 4. the refitted candidates are ranked by validation RMS (those within ``min_gain / 2`` of the best by the
    information criterion, so that the simpler of two equally good effects wins); the first whose validation
-   RMS falls (by at least ``min_gain``) and whose criterion falls is accepted and polished (``max_iter``
-   iterations);
+   RMS falls (by at least ``min_gain``, over all validation records and on the median record) and whose
+   criterion falls is accepted and polished (``max_iter`` iterations);
 5. repeat until nothing is significant, nothing is accepted, or ``rounds`` rounds are done.
 
 AIC = N ln(SSE/N) + 2k and BIC = N ln(SSE/N) + k ln N on the training record, N the number of residuals, k
@@ -26,7 +30,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -39,7 +43,8 @@ from .effects import BUILTIN_EFFECTS, Effect, Scales
 from .residual import signal_correlation, whiteness
 from .score import Candidate, Score, Screen, screen
 
-__all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "refit_unit", "REPORT_FORMAT", "REPORT_VERSION"]
+__all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "refit_unit", "refusal", "REPORT_FORMAT",
+           "REPORT_VERSION"]
 
 REPORT_FORMAT = "sdnn-diagnose"
 REPORT_VERSION = 1
@@ -64,6 +69,16 @@ class DiagnoseSettings:
     alignment: str = "zoh"
     seed: int = 0
     split: float | None = None
+    # the refit from the chart as given of a candidate that is not neutral (a scanned gap, clip or delay) is
+    # done twice, the second time with a growing horizon: first on the leading `horizon` samples of each
+    # training record, then on 4x longer leading parts, each stage from the last one's fit, up to the whole
+    # records (0: off). A drive with backlash is chaotic: from the chart as given a fit of the gap over whole
+    # 3 s records stops in a local minimum (backlash bench: validation RMS 0.127, d +5.6 %); 500 samples are
+    # shorter than the time the trajectories take to diverge, and from there the longer stages stay in the
+    # right basin (0.0595, every linear parameter within 1 %). In addition to the plain refit, not instead: a
+    # learned friction curve bent on the first 0.5 s of a 30 s record ends worse (friction bench: validation
+    # RMS 0.079 against 0.056)
+    horizon: int = 500
     # trainlm's fixed first damping (IdentifySettings.lm_tau = 0): the brief refits start next to a fit, where
     # identify's scaled damping spends the few iterations they have on short steps (measured on the backlash
     # bench: validation RMS down 3.2x with 0, 2.2x with identify's 1e-3)
@@ -82,6 +97,8 @@ class DiagnoseSettings:
             raise ValueError("--criterion must be aic or bic")
         if not 0 <= self.min_gain < 1:
             raise ValueError("--min-gain must lie in [0, 1)")
+        if self.horizon < 0:
+            raise ValueError("horizon must not be negative")
         if self.split is not None and not 0 < self.split < 1:
             raise ValueError("--split must lie strictly between 0 and 1")
 
@@ -109,6 +126,12 @@ class Fitted:
     @property
     def validation_rms(self) -> float:
         return self.validation["rms_all"]
+
+    @property
+    def validation_median(self) -> float:
+        """The RMS (all outputs) of the median validation record: what a typical record shows."""
+        each = self.validation.get("rms_records", [])
+        return float(np.median(each)) if each else math.nan
 
     def criterion(self, which: str) -> float:
         if not (self.cost > 0 and math.isfinite(self.cost)):
@@ -150,17 +173,56 @@ def _rms_all(ms: Sequence[dict], n_out: int) -> float:
 def _validate(ident: Identification, records: Sequence[tuple[Dataset, int]], alignment: str) -> dict:
     compiled = ident.problem.compiled
     per = [metrics(compiled, ident.x, ds, alignment, score_from=start) for ds, start in records]
-    return {"rms_all": _rms_all(per, compiled.n_outputs), "records": per}
+    return {"rms_all": _rms_all(per, compiled.n_outputs), "records": per,
+            "rms_records": [_rms_all([m], compiled.n_outputs) for m in per]}
 
 
 def _fit(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int, extra_dof: int,
          start: str, progress: Progress | None = None, accepted: tuple = ()) -> Fitted:
+    return _fitted(_identify(diagram, train, settings, max_iter, progress), records, settings, extra_dof, start,
+                   accepted)
+
+
+def _identify(diagram: Diagram, train: list[Dataset], settings: DiagnoseSettings, max_iter: int,
+              progress: Progress | None = None) -> Identification:
     s = IdentifySettings(max_iter=max_iter, seed=settings.seed, alignment=settings.alignment, lm_tau=settings.lm_tau)
-    ident = identify(diagram, train if len(train) > 1 else train[0], None, s, progress)
+    return identify(diagram, train if len(train) > 1 else train[0], None, s, progress)
+
+
+def _fitted(ident: Identification, records, settings: DiagnoseSettings, extra_dof: int, start: str,
+            accepted: tuple) -> Fitted:
     cost = ident.result["fit"]["train"]["cost"]
     cost = math.inf if cost is None else float(cost)
     return Fitted(ident, cost, ident.problem.n_residuals, len(ident.problem.names) + extra_dof,
                   _validate(ident, records, settings.alignment), start, accepted)
+
+
+def _horizons(train: Sequence[Dataset], first: int) -> list[int]:
+    """The leading lengths (samples) of the growing-horizon stages before the fit on the whole records."""
+    longest = max(d.n_rows for d in train)
+    out, h = [], first
+    while 0 < h < longest:
+        out.append(h)
+        h *= 4
+    return out
+
+
+def _fit_growing(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int,
+                 extra_dof: int, start: str, accepted: tuple = ()) -> Fitted:
+    """:func:`_fit` on the leading parts of the training records (``settings.horizon`` samples, then 4x longer),
+    each stage from the last one's fit, and finally on the whole records."""
+    for h in _horizons(train, settings.horizon):
+        try:
+            ident = _identify(diagram, [d.slice(0, h) if d.n_rows > h else d for d in train], settings, max_iter)
+        except (SdnnError, ValueError, KeyError):
+            break  # a stage the short parts cannot support: the fit on the whole records decides
+        if ident.result.get("status") == "interrupted":
+            return _fitted(ident, records, settings, extra_dof, start, accepted)
+        cost = ident.result["fit"]["train"]["cost"]
+        if cost is None or not math.isfinite(cost):
+            break  # diverged on a short stage: continue from where it was
+        diagram = ident.diagram
+    return _fit(diagram, train, records, settings, max_iter, extra_dof, start, None, accepted)
 
 
 def _current_problem(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> Problem:
@@ -256,6 +318,24 @@ def _order(refits: list[tuple[Score, Fitted]], settings: DiagnoseSettings) -> li
     return sorted(tied, key=lambda sf: sf[1].criterion(settings.criterion)) + rest
 
 
+def refusal(after: Fitted, before: Fitted, settings: DiagnoseSettings) -> str | None:
+    """Why the refit `after` must not replace `before`, or None when it may: the validation RMS must fall by at
+    least ``min_gain`` over all validation records and on the median record, and the criterion must fall.
+
+    The median record: on a chaotic drive one short record whose trajectory diverges (or locks back) moves the
+    pooled RMS by several % (backlash bench, round 2: a cogging term the plant lacks lowered one record's RMS
+    0.083 -> 0.074 and left the other four as they were); an effect must help the typical record.
+    """
+    keep = 1 - settings.min_gain
+    if not after.validation_rms < before.validation_rms * keep:
+        return "validation RMS did not fall enough"
+    if not after.validation_median < before.validation_median * keep:
+        return "validation RMS of the median record did not fall enough"
+    if not after.criterion(settings.criterion) < before.criterion(settings.criterion):
+        return f"{settings.criterion.upper()} did not fall"
+    return None
+
+
 def _repeatable(effect: Effect) -> bool:
     return bool(getattr(effect, "repeatable", effect.name == "cogging"))
 
@@ -307,7 +387,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
         The library to try (default: every built-in effect).
     progress : callable(text, fraction), optional
     executor : a :mod:`flowchart2sdnn.parallel` executor, optional
-        Runs the brief refits of each round (two per refitted candidate); in this process when None.
+        Runs the brief refits of each round (two work units per refitted candidate); in this process when None.
 
     Returns
     -------
@@ -368,14 +448,12 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             refits = _order(refits, settings)
             choice, reason = None, "no refit succeeded"
             for s, f in refits:
-                ok_val = f.validation_rms < current.validation_rms * (1 - settings.min_gain)
-                ok_crit = f.criterion(settings.criterion) < current.criterion(settings.criterion)
-                if ok_val and ok_crit:
+                why = refusal(f, current, settings)
+                if why is None:
                     choice = (s, f)
                     break
                 if choice is None and reason == "no refit succeeded":
-                    reason = (f"{s.candidate.title()}: " + ("validation RMS did not fall enough" if not ok_val else
-                              f"{settings.criterion.upper()} did not fall"))
+                    reason = f"{s.candidate.title()}: {why}"
             if choice is None:
                 s, f = refits[0] if refits else (best[0], None)
                 rounds.append(_round_entry(r, s, current, f, False, reason, settings))
@@ -429,11 +507,17 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
 
 def refit_unit(unit: tuple) -> tuple[Fitted | None, float]:
     """One brief refit: (chart, train, records, settings, max_iter, dof, start, accepted) -> (Fitted or None,
-    seconds). Module level, so that any executor's worker can run it."""
+    seconds). From the chart as given (start "nominal") also with a growing horizon (``settings.horizon``),
+    keeping the lower training cost (its start then reads "horizon"). Module level, so that any executor's
+    worker can run it."""
     chart, train, records, settings, max_iter, dof, start, acc = unit
     t0 = time.perf_counter()
     try:
         fitted = _fit(chart, train, records, settings, max_iter, dof, start, None, acc)
+        if start == "nominal" and settings.horizon > 0 and not _was_interrupted(fitted):
+            grown = _fit_growing(chart, train, records, settings, max_iter, dof, "horizon", acc)
+            if _was_interrupted(grown) or grown.cost < fitted.cost:
+                fitted = grown
     except (SdnnError, ValueError, KeyError):
         fitted = None
     return fitted, time.perf_counter() - t0
@@ -444,17 +528,25 @@ def _refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Dataset],
     """(score, the better of its brief refits or None, seconds) for each candidate in `best`, in order.
 
     Each candidate is refitted from the current fit and from the chart as given (plus the accepted effects),
-    every one with its new effect at neutral values; ties go to the refit from the current fit.
+    every one with its new effect at neutral values (or at its scanned option); a candidate that is not
+    neutral is refitted from the chart as given twice, on the whole records at once and with a growing
+    horizon (``settings.horizon``), in one work unit. The lowest training cost wins, ties go to the refit from
+    the current fit.
     """
     acc = tuple(a["effect"] + "@" + a["at"] for a in accepted)
     units, owner = [], []
     for i, s in enumerate(best):
         c = s.candidate
         dof = extra_dof + c.effect.extra_dof
+        # the growing horizon only for a candidate that changes the model at once (a scanned gap, clip or
+        # delay): a neutral one starts on the chart as given's own trajectory, and a learned curve bent on the
+        # first 500 samples first ends elsewhere (friction bench: worse; EMPS: the learned curve then wins
+        # over the physical friction terms)
+        unit_settings = settings if not c.neutral else replace(settings, horizon=0)
         for start, chart in (("previous", lambda c=c: c.diagram),
                              ("nominal", lambda c=c: c.effect.patch(nominal_chart, c.place, c.option))):
             try:
-                units.append((chart(), train, records, settings, settings.refit_iter, dof, start, acc))
+                units.append((chart(), train, records, unit_settings, settings.refit_iter, dof, start, acc))
             except (SdnnError, ValueError, KeyError):
                 continue
             owner.append(i)
