@@ -39,7 +39,7 @@ from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify.problem import Problem, build_problem, metrics
 from ..identify.run import Identification, IdentifySettings, identify
-from .effects import BUILTIN_EFFECTS, Effect, Scales
+from .effects import BUILTIN_EFFECTS, Effect, Physical, Scales
 from .residual import signal_correlation, whiteness
 from .score import Candidate, Score, Screen, screen
 
@@ -286,8 +286,7 @@ def _candidates(effects: Sequence[Effect], current: Diagram, scales: Scales, don
     for effect in effects:
         for place in effect.places(current):
             for option in effect.options(current, place, scales):
-                key = (effect.name, place.at) + ((effect.label(option),) if _repeatable(effect) else ())
-                if key not in done:
+                if (effect.name, place.at) not in done and (effect.name, place.at, effect.label(option)) not in done:
                     out.append(Candidate(effect, place, option, current))
     return out
 
@@ -341,7 +340,12 @@ def _repeatable(effect: Effect) -> bool:
 
 
 def _done_key(c: Candidate) -> tuple:
-    return (c.name, c.at) + ((c.label,) if _repeatable(c.effect) else ())
+    """What an accepted candidate takes off the list: the effect at that place, or only that option of it for
+    a repeatable effect (cogging harmonics) and for friction's physical terms (a learned curve may still follow
+    there: Coulomb + viscous terms cannot bend into a Stribeck bump, and without the curve the loop fills the
+    bump in with a cogging term the plant lacks, README tour bench)."""
+    partial = _repeatable(c.effect) or isinstance(c.option, Physical)
+    return (c.name, c.at) + ((c.label,) if partial else ())
 
 
 # ------------------------------------------------------------------------------------------------ loop
