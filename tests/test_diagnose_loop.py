@@ -108,7 +108,7 @@ def test_cli_writes_the_augmented_chart_and_the_report(files):
     out, rep = files / "aug.yaml", files / "rep.json"
     args = ["diagnose", str(files / "train.csv"), "--diagram", str(src), "--validate", str(files / "val.csv"),
             "-o", str(out), "--report", str(rep), "--effects", "friction,damping", "--rounds", "1",
-            "--plots", str(files / "plots")]
+            "--plots", str(files / "plots"), "--horizon", "250"]
     res = CliRunner().invoke(main, args)
     assert res.exit_code == 0, res.output
     for png in ("residual_friction_v.png", "whiteness.png"):
@@ -116,6 +116,7 @@ def test_cli_writes_the_augmented_chart_and_the_report(files):
     assert "accepted: friction at v" in res.output and "final chart:" in res.output
     report = json.loads(rep.read_text())
     assert report["accepted"][0]["effect"] == "friction" and report["command"]["validate"]
+    assert report["settings"]["horizon"] == 250
     aug = load_diagram(out)
     assert "fric_v" in aug.block_names and aug.block("fric_v").weights is not None
     assert hashlib.sha256(src.read_bytes()).hexdigest() == digest

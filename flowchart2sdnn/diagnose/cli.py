@@ -67,6 +67,9 @@ def register(main: click.Group) -> None:
                   help="LM iterations of each brief refit of a candidate.")
     @click.option("--max-iter", type=click.IntRange(min=0), default=100, show_default=True,
                   help="LM iterations of the first fit and of each accepted chart.")
+    @click.option("--horizon", type=click.IntRange(min=0), default=500, show_default=True,
+                  help="Samples of the first stage of the growing-horizon refit of a non-neutral candidate (a gap, "
+                       "clip or delay) from the chart as given; 0: off.")
     @click.option("--top", type=click.IntRange(min=1), default=5, show_default=True,
                   help="Places refitted per round (the best option of each).")
     @click.option("--criterion", type=click.Choice(["aic", "bic"]), default="bic", show_default=True,
@@ -89,7 +92,7 @@ def register(main: click.Group) -> None:
     @executor_options("the candidate refits")
     @handle_errors
     def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
-                 refit_iter, max_iter, top, criterion, min_gain, alpha, dead_time_max, harmonics, alignment,
+                 refit_iter, max_iter, horizon, top, criterion, min_gain, alpha, dead_time_max, harmonics, alignment,
                  mapping, seed, force, quiet, workers=None, scheduler=None) -> None:
         """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
         chart, refit, and report the error before and after."""
@@ -135,7 +138,7 @@ def register(main: click.Group) -> None:
         val = [read_csv(v, cols, maps, diagram.sample_time) for v in validation]
         settings = DiagnoseSettings(rounds=rounds, top=top, refit_iter=refit_iter, max_iter=max_iter,
                                     alpha=alpha, criterion=criterion, min_gain=min_gain, alignment=alignment,
-                                    seed=seed, split=split)
+                                    seed=seed, split=split, horizon=horizon)
         progress = Progress(quiet)
         executor = None
         try:
