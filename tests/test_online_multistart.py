@@ -22,7 +22,7 @@ from flowchart2sdnn.fit.multistart import draw_starts
 from flowchart2sdnn.fit.online import OnlineOptions, quasi_online
 from flowchart2sdnn.identify.problem import build_problem, required_columns
 from flowchart2sdnn.identify.run import IdentifySettings, identify
-from flowchart2sdnn.parallel import SerialExecutor, make_executor
+from flowchart2sdnn.parallel import SerialExecutor, make_executor, online_start
 
 DIAGRAMS = Path(__file__).resolve().parents[1] / "diagrams"
 SETTINGS = IdentifySettings(online=True, window=1500, average=500, starts=3, seed=4)
@@ -73,6 +73,21 @@ def test_an_executor_gives_the_same_result(record, executor):
     assert through["multistart"]["costs"] == serial["multistart"]["costs"]
     assert through["parameters"] == serial["parameters"]
     assert through["nonlinear"] == serial["nonlinear"]
+
+
+def test_every_start_is_handed_to_the_executor(record):
+    """The equality above would hold if the executor were ignored: check that each start is one work unit."""
+    _, chart, data = record
+    calls = []
+
+    class Recording(SerialExecutor):
+        def map(self, fn, items):
+            items = list(items)
+            calls.append((getattr(fn, "func", fn), len(items)))
+            return super().map(fn, items)
+
+    identify(chart, data, None, SETTINGS, executor=Recording())
+    assert calls == [(online_start, SETTINGS.starts)]
 
 
 def test_a_stop_after_the_first_run_keeps_that_run_marked_interrupted(record):

@@ -9,14 +9,13 @@ read off the measured high-frequency sine records (where cart 2 stands still).
 
 from __future__ import annotations
 
-import importlib.util
 import json
 import math
-import sys
 from pathlib import Path
 
 import numpy as np
 import pytest
+from paper_example import example
 
 REPO = Path(__file__).resolve().parents[1]
 DATA = REPO.parent / "shared" / "data" / "real" / "uwaterloo_mte360_flexible_drive"
@@ -32,14 +31,7 @@ pytestmark = [
 
 
 def _example():
-    """examples/flexible_drive.py as a module (registered first: its dataclasses look themselves up)."""
-    name = "flexible_drive_example"
-    if name not in sys.modules:
-        spec = importlib.util.spec_from_file_location(name, REPO / "examples" / "flexible_drive.py")
-        module = importlib.util.module_from_spec(spec)
-        sys.modules[name] = module
-        spec.loader.exec_module(module)
-    return sys.modules[name]
+    return example("flexible_drive")
 
 
 def _columns(name: str) -> dict[str, np.ndarray]:

@@ -265,6 +265,12 @@ class Friction:
     def label(self, option) -> str:
         return "coulomb" if isinstance(option, Physical) else ""
 
+    def leaves_room(self, option) -> bool:
+        """Accepted physical terms leave the learned curve on offer at that speed: Coulomb + viscous terms
+        cannot bend into a Stribeck bump, and without the curve the loop filled the bump in with a cogging
+        term the plant lacks (README tour bench)."""
+        return isinstance(option, Physical)
+
 
 @dataclass(frozen=True)
 class Damping:

@@ -39,7 +39,7 @@ from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify.problem import Problem, build_problem, metrics
 from ..identify.run import Identification, IdentifySettings, identify
-from .effects import BUILTIN_EFFECTS, Effect, Physical, Scales
+from .effects import BUILTIN_EFFECTS, Effect, Scales
 from .residual import signal_correlation, whiteness
 from .score import Candidate, Score, Screen, screen
 
@@ -341,10 +341,10 @@ def _repeatable(effect: Effect) -> bool:
 
 def _done_key(c: Candidate) -> tuple:
     """What an accepted candidate takes off the list: the effect at that place, or only that option of it for
-    a repeatable effect (cogging harmonics) and for friction's physical terms (a learned curve may still follow
-    there: Coulomb + viscous terms cannot bend into a Stribeck bump, and without the curve the loop fills the
-    bump in with a cogging term the plant lacks, README tour bench)."""
-    partial = _repeatable(c.effect) or isinstance(c.option, Physical)
+    a repeatable effect (cogging harmonics) and for an option the effect says leaves room for its others
+    (``leaves_room(option)``: friction's physical terms)."""
+    leaves_room = getattr(c.effect, "leaves_room", None)
+    partial = _repeatable(c.effect) or (leaves_room is not None and leaves_room(c.option))
     return (c.name, c.at) + ((c.label,) if partial else ())
 
 

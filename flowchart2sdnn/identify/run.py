@@ -130,12 +130,13 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         x = x0
         status, message = "nothing_to_fit", "every parameter and curve is fixed; only the fit was evaluated"
     elif settings.online:
-        online_result, multistart_summary = _online(problem, x0, lower, upper, settings, progress, stop, executor)
+        online_result, ms = _online(problem, x0, lower, upper, settings, progress, stop, executor)
         x = np.asarray(online_result.theta_mean, dtype=float)
         status, message = online_result.status, online_result.message
         interrupted = status == "interrupted"
-        if multistart_summary is not None and multistart_summary.pop("_local"):
-            warnings.append(multistart_summary["message"])
+        if ms is not None:
+            multistart_summary = _multistart_summary(ms, names, warnings)
+            multistart_summary["cost"] = "mean window cost over the last K steps of each quasi-online run"
     else:
         # stop once an iteration gains less than 1e-10 of the cost: further iterations only polish noise
         options = LMOptions(max_iter=settings.max_iter, min_rel_cost_change=1e-10, tau=settings.lm_tau)
@@ -166,11 +167,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         lm_result = ms.best
         x = np.asarray(lm_result.x, dtype=float)
         status, message, interrupted = lm_result.status, lm_result.message, ms.interrupted or lm_result.interrupted
-        multistart_summary = ms.summary()
-        if settings.starts > 1:
-            multistart_summary["names"] = list(names)
-            if ms.local_minima:
-                warnings.append(ms.message)
+        multistart_summary = _multistart_summary(ms, names, warnings) if settings.starts > 1 else ms.summary()
         if interrupted:
             status = "interrupted"
 
@@ -294,7 +291,8 @@ def _on_bound_warnings(names, x0: np.ndarray, lower: np.ndarray, upper: np.ndarr
 
 
 def _online(problem: Problem, x0, lower, upper, settings: IdentifySettings, progress, stop, executor):
-    """Quasi-online from x0, or from `settings.starts` seeded starts: (the chosen OnlineResult, summary | None).
+    """Quasi-online from x0, or from `settings.starts` seeded starts: (the chosen OnlineResult, the
+    MultiStartResult or None).
 
     With several starts each run is a whole quasi-online pass; the one with the lowest mean window cost at
     the end of the record (the paper's error of a run) is reported, as a bank of online estimators would.
@@ -329,15 +327,20 @@ def _online(problem: Problem, x0, lower, upper, settings: IdentifySettings, prog
         return bool(stop and stop())
 
     ms = run_multistart(fit_one, starts, callback=start_done, executor=executor)
-    summary = ms.summary()
-    summary["names"] = list(problem.names)
-    summary["cost"] = "mean window cost over the last K steps of each quasi-online run"
-    summary["_local"] = bool(ms.local_minima)
     best = ms.best.result
     if ms.interrupted and best.status not in ("interrupted", "callback_stop"):
         best = replace(best, status="interrupted",
-                                   message="interrupted: the best of the runs finished so far is returned")
-    return best, summary
+                       message="interrupted: the best of the runs finished so far is returned")
+    return best, ms
+
+
+def _multistart_summary(ms, names, warnings: list[str]) -> dict:
+    """The `multistart` entry of the result; a run that ended in a clearly worse minimum is also a warning."""
+    summary = ms.summary()
+    summary["names"] = list(names)
+    if ms.local_minima:
+        warnings.append(ms.message)
+    return summary
 
 
 def _online_tick(progress, stop, fraction: float, label: str = "quasi-online") -> bool:
