@@ -23,9 +23,9 @@ from pathlib import Path
 import numpy as np
 
 from flowchart2sdnn.data.csvdata import write_csv
-from flowchart2sdnn.data.excitation import ExcitationSettings, excite
 from flowchart2sdnn.diagram.validate import diagram_from_text
-from flowchart2sdnn.parallel import make_executor
+from flowchart2sdnn.executors import make_executor
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 REPO = Path(__file__).resolve().parents[1]
 

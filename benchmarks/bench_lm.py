@@ -38,10 +38,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from flowchart2sdnn.compiler import compile_file  # noqa: E402
-from flowchart2sdnn.data.excitation import ExcitationSettings, excite  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt  # noqa: E402
 from flowchart2sdnn.network.runtime import CompiledNetwork  # noqa: E402
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
 
 
 def main() -> None:

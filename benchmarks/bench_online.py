@@ -40,10 +40,10 @@ ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
 
 from flowchart2sdnn.compiler import compile_file  # noqa: E402
-from flowchart2sdnn.data.excitation import ExcitationSettings, excite  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
-from flowchart2sdnn.fit.online import OnlineOptions, quasi_online  # noqa: E402
+from flowchart2sdnn.identify.online import OnlineOptions, quasi_online  # noqa: E402
 from flowchart2sdnn.network.runtime import CompiledNetwork  # noqa: E402
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
 
 
 def flops_per_sample(cn: CompiledNetwork) -> float:

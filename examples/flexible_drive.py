@@ -42,7 +42,7 @@ from flowchart2sdnn.identify.problem import Problem, build_problem, metrics, req
 from flowchart2sdnn.identify.run import IdentifySettings, identify
 from flowchart2sdnn.network.runtime import CompiledNetwork
 from flowchart2sdnn.network.stability import rest_eigenvalues
-from flowchart2sdnn.report import table
+from flowchart2sdnn.tables import table
 
 REPO = Path(__file__).resolve().parents[1]
 DATA_DIR = REPO.parent / "shared" / "data" / "real" / "uwaterloo_mte360_flexible_drive"

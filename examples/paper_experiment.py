@@ -50,14 +50,15 @@ import numpy as np  # noqa: E402
 
 from flowchart2sdnn.compiler import compile_diagram  # noqa: E402
 from flowchart2sdnn.data.csvdata import Dataset, read_csv, write_csv  # noqa: E402
-from flowchart2sdnn.data.excitation import ExcitationSettings, excite  # noqa: E402
+from flowchart2sdnn.diagram.dump import dump_diagram, with_values  # noqa: E402
 from flowchart2sdnn.diagram.model import Diagram  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt  # noqa: E402
 from flowchart2sdnn.fit.multistart import draw_starts, run_multistart  # noqa: E402
-from flowchart2sdnn.identify.chartio import dump_diagram, fix_from_result, with_values  # noqa: E402
+from flowchart2sdnn.identify.chartio import fix_from_result  # noqa: E402
 from flowchart2sdnn.identify.problem import Problem, build_problem, required_columns  # noqa: E402
 from flowchart2sdnn.identify.run import IdentifySettings, identify  # noqa: E402
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
 CHARTS = REPO / "diagrams" / "paper"

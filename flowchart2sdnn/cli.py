@@ -54,7 +54,7 @@ def handle_errors(func):
 
 
 def executor_options(work: str):
-    """`--workers N` and `--scheduler ADDRESS` (see flowchart2sdnn.parallel.make_executor), worded for `work`."""
+    """`--workers N` and `--scheduler ADDRESS` (see flowchart2sdnn.executors.make_executor), worded for `work`."""
 
     def decorate(func):
         func = click.option("--scheduler", metavar="ADDRESS",
@@ -116,7 +116,7 @@ def compile_(chart: str, output: str | None, explain: bool, dot: str | None, see
     """Compile CHART into a structured GDNN with administration matrices."""
     from .atomic import atomic_write_text, check_output_path
     from .compiler import compile_file
-    from .report import explain_network, network_dot
+    from .network.explain import explain_network, network_dot
 
     for path in (output, dot):
         if path:
@@ -170,7 +170,7 @@ def simulate(chart, data, output, params, continuous, signals, alignment, mappin
     init = {n: float(ds.columns[n][0]) for n in data_init_outputs}
     time = ds.time if ds.time is not None else np.arange(ds.n_rows) * diagram.sample_time
     if continuous:
-        from .data.continuous import simulate_continuous
+        from .simulate.continuous import simulate_continuous
 
         result = simulate_continuous(diagram, u, init=init, signals=(signals == "all"))
         if signals == "all":
@@ -178,8 +178,8 @@ def simulate(chart, data, output, params, continuous, signals, alignment, mappin
         else:
             columns = {"time": time, **{n: result[:, i] for i, n in enumerate(diagram.output_names)}}
     else:
-        from .alignment import run_aligned
         from .compiler import compile_diagram
+        from .network.alignment import run_aligned
         from .network.runtime import CompiledNetwork
 
         net = compile_diagram(diagram).network
@@ -188,7 +188,7 @@ def simulate(chart, data, output, params, continuous, signals, alignment, mappin
         y = run_aligned(compiled, theta, u, alignment, init)
         columns = {"time": time, **{n: y[:, i] for i, n in enumerate(compiled.output_names)}}
         if signals == "all":
-            from .alignment import network_inputs
+            from .network.alignment import network_inputs
             from .network.flat import flatten, signal_names
 
             p = network_inputs(u, alignment)
@@ -239,9 +239,9 @@ def excite(plant, seconds, seed, output, amplitude, hold, relay_level, relay_swi
     """Virtual test bench: simulate PLANT continuously under the paper's APRBS + relay excitation."""
     from .atomic import check_output_path
     from .data.csvdata import write_csv
-    from .data.excitation import ExcitationSettings
-    from .data.excitation import excite as run_excite
     from .diagram.validate import load_diagram
+    from .simulate.excitation import ExcitationSettings
+    from .simulate.excitation import excite as run_excite
 
     check_output_path(output, [plant], force=force)
     diagram = load_diagram(plant)

@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from flowchart2sdnn.diagram.expr import parse_expr
 from flowchart2sdnn.diagram.model import Block, Diagram, NonlinearWeights, Parameter, Signal, Term
+from flowchart2sdnn.expr import parse_expr
 
 # Friction curves of the two-mass test chart: Coulomb-like steep tanh plus a viscous-like flat one.
 FRICTION1 = NonlinearWeights(a=(50.0, 0.1), v=(0.6, 2.0))

@@ -6,13 +6,13 @@ from pathlib import Path
 
 import numpy as np
 
-from flowchart2sdnn.alignment import run_aligned
 from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.data.csvdata import Dataset
-from flowchart2sdnn.data.excitation import ExcitationSettings, excite
 from flowchart2sdnn.diagram.model import Diagram
 from flowchart2sdnn.diagram.validate import load_diagram
+from flowchart2sdnn.network.alignment import run_aligned
 from flowchart2sdnn.network.runtime import CompiledNetwork
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 DATA = Path(__file__).resolve().parent / "data" / "diagnose"
 REAL = Path(__file__).resolve().parents[1].parent / "shared" / "data" / "real"

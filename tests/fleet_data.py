@@ -38,8 +38,8 @@ def write_chart(directory: Path) -> Path:
 def write_log(path: Path, seed: int, seconds: float = 1.0, noise: float = 0.01, **params: float) -> Path:
     """Excite the drive with the given parameters (default TRUTH) and write its log as CSV."""
     from flowchart2sdnn.data.csvdata import write_csv
-    from flowchart2sdnn.data.excitation import ExcitationSettings, excite
     from flowchart2sdnn.diagram.validate import diagram_from_text
+    from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
     diagram = diagram_from_text(DRIVE_CHART, "drive.yaml")
     values = {**TRUTH, **params}

@@ -16,7 +16,7 @@ from click.testing import CliRunner
 from fleet_data import TRUTH, write_chart, write_log
 
 from flowchart2sdnn.batch.cli import expand_files
-from flowchart2sdnn.batch.report import drift_table, load_fleet, parse_group, plots_available, write_report
+from flowchart2sdnn.batch.drift import drift_table, load_fleet, parse_group, plots_available, write_report
 from flowchart2sdnn.batch.results import columns_for, parquet_available, read_results
 from flowchart2sdnn.batch.run import BatchSettings, run_batch
 from flowchart2sdnn.cli import main
@@ -308,7 +308,7 @@ def test_diagnose_column_and_report_section(fleet, tmp_path, monkeypatch):
     assert rows["A_day002.csv"]["effects"] == "none"
     with pytest.raises(SdnnError, match="BATCH002"):  # a table without the column is another configuration
         run_batch(fleet["diagram"], fleet["files"], str(out), FAST)
-    from flowchart2sdnn.batch.report import effects_table
+    from flowchart2sdnn.batch.drift import effects_table
 
     effects = effects_table(load_fleet(out))
     assert effects == [{"drive": "B", "effect": "friction@w1", "days": ["1", "2"], "of": 3, "first_day": "1"},

@@ -15,9 +15,9 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flowchart2sdnn.alignment import run_aligned
 from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.diagram.validate import diagram_from_text, load_diagram
+from flowchart2sdnn.network.alignment import run_aligned
 from flowchart2sdnn.network.runtime import CompiledNetwork
 
 DIAGRAMS = Path(__file__).resolve().parents[1] / "diagrams"

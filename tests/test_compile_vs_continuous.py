@@ -1,6 +1,6 @@
 """The compiled network (zoh alignment) against the continuous chart (issue 2, acceptance 2).
 
-The oracle is flowchart2sdnn.data.continuous.simulate_continuous: fine-step RK4 of the chart itself, inputs
+The oracle is flowchart2sdnn.simulate.continuous.simulate_continuous: fine-step RK4 of the chart itself, inputs
 zero-order held (row k acts on [t_k, t_k+1)), row k the chart at t_k. It shares no code with the compiler.
 The network runs with the default alignment for logged data ("zoh": row 0 is the initial state, the network
 input at row k is u(k-1)), so both describe the same held input.
@@ -21,12 +21,12 @@ import numpy as np
 import pytest
 import yaml
 
-from flowchart2sdnn.alignment import run_aligned
 from flowchart2sdnn.compiler import compile_diagram
-from flowchart2sdnn.data.continuous import simulate_continuous
-from flowchart2sdnn.data.excitation import aprbs
 from flowchart2sdnn.diagram.validate import diagram_from_text
+from flowchart2sdnn.network.alignment import run_aligned
 from flowchart2sdnn.network.runtime import CompiledNetwork
+from flowchart2sdnn.simulate.continuous import simulate_continuous
+from flowchart2sdnn.simulate.excitation import aprbs
 
 DIAGRAMS = Path(__file__).resolve().parents[1] / "diagrams"
 PAPER = {"J1": 0.1912, "J2": 0.3838, "c": 477.0, "d": 0.24}

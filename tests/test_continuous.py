@@ -10,8 +10,8 @@ from continuous_charts import FRICTION1, FRICTION2, TMS_PARAMETERS, block, chart
 from scipy.integrate import solve_ivp
 from scipy.signal import cont2discrete
 
-from flowchart2sdnn.data.continuous import RelayFeedback, simulate_continuous
 from flowchart2sdnn.diagram.model import NonlinearWeights
+from flowchart2sdnn.simulate.continuous import RelayFeedback, simulate_continuous
 
 
 def zoh_reference(rhs, x0, u, T):

@@ -10,7 +10,7 @@ from diagnose_bench import chart, record
 from flowchart2sdnn.diagnose.cli import _json_safe
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose, refit_unit
-from flowchart2sdnn.parallel import DaskExecutor, ProcessExecutor, SerialExecutor
+from flowchart2sdnn.executors import DaskExecutor, ProcessExecutor, SerialExecutor
 
 EXCITATION = {"amplitude": (-6.0, 6.0), "relay_level": 3.0, "relay_switch": 1.0, "relay_band": 0.2}
 EFFECTS = [BUILTIN_EFFECTS[n] for n in ("friction", "damping", "saturation")]

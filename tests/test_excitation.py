@@ -8,8 +8,8 @@ import numpy as np
 import pytest
 from continuous_charts import block, chart, integrator_plant, two_mass
 
-from flowchart2sdnn.data.continuous import simulate_continuous
-from flowchart2sdnn.data.excitation import ExcitationSettings, aprbs, excite
+from flowchart2sdnn.simulate.continuous import simulate_continuous
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, aprbs, excite
 
 
 def runs(x):

@@ -9,7 +9,7 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from flowchart2sdnn.diagram.expr import (
+from flowchart2sdnn.expr import (
     MAX_DEPTH,
     BinOp,
     Expr,

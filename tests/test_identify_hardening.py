@@ -17,12 +17,12 @@ from click.testing import CliRunner
 
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.data.csvdata import read_csv, write_csv
-from flowchart2sdnn.data.excitation import ExcitationSettings, excite
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
 from flowchart2sdnn.fit.lm import STATUS_MESSAGES
 from flowchart2sdnn.identify.problem import required_columns
 from flowchart2sdnn.identify.run import IdentifySettings, _json_safe, identify
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 ROOT = Path(__file__).resolve().parents[1]
 DIAGRAMS = ROOT / "diagrams"

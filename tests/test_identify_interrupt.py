@@ -22,10 +22,10 @@ import numpy as np
 import pytest
 
 from flowchart2sdnn.data.csvdata import read_csv, write_csv
-from flowchart2sdnn.data.excitation import ExcitationSettings, excite
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.identify.problem import build_problem, required_columns
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 ROOT = Path(__file__).resolve().parents[1]
 DIAGRAMS = ROOT / "diagrams"

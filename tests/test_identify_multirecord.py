@@ -5,12 +5,12 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from flowchart2sdnn.alignment import run_aligned
 from flowchart2sdnn.data.csvdata import read_csv, write_csv
-from flowchart2sdnn.data.excitation import ExcitationSettings, excite
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
 from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.network.alignment import run_aligned
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 DIAGRAMS = Path(__file__).resolve().parents[1] / "diagrams"
 

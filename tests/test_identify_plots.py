@@ -13,10 +13,10 @@ from click.testing import CliRunner
 
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.data.csvdata import read_csv, write_csv
-from flowchart2sdnn.data.excitation import ExcitationSettings, excite
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.identify.problem import required_columns
 from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 ROOT = Path(__file__).resolve().parents[1]
 DIAGRAMS = ROOT / "diagrams"
@@ -75,8 +75,8 @@ def test_plots_online_include_parameter_trajectories(engine_csv, tmp_path):
 
 def test_curve_range_is_the_range_of_the_signal_feeding_the_block(tmp_path):
     """The nonlinear block MR2 of the two-mass chart is fed by w2, MR1 by w1: their ranges over a free run."""
-    from flowchart2sdnn.alignment import run_aligned
     from flowchart2sdnn.identify.plots import curve_input_range
+    from flowchart2sdnn.network.alignment import run_aligned
 
     data = _record(tmp_path / "tm.csv", "two_mass_plant.yaml", 1.0, seed=2)
     diagram = load_diagram(DIAGRAMS / "two_mass.yaml")

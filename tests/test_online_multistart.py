@@ -16,13 +16,14 @@ from click.testing import CliRunner
 
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.data.csvdata import read_csv, write_csv
-from flowchart2sdnn.data.excitation import ExcitationSettings, excite
 from flowchart2sdnn.diagram.validate import load_diagram
+from flowchart2sdnn.executors import SerialExecutor, make_executor
 from flowchart2sdnn.fit.multistart import draw_starts
-from flowchart2sdnn.fit.online import OnlineOptions, quasi_online
+from flowchart2sdnn.identify.online import OnlineOptions, quasi_online
 from flowchart2sdnn.identify.problem import build_problem, required_columns
 from flowchart2sdnn.identify.run import IdentifySettings, identify
-from flowchart2sdnn.parallel import SerialExecutor, make_executor, online_start
+from flowchart2sdnn.identify.workers import online_start
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 DIAGRAMS = Path(__file__).resolve().parents[1] / "diagrams"
 SETTINGS = IdentifySettings(online=True, window=1500, average=500, starts=3, seed=4)

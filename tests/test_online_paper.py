@@ -14,8 +14,9 @@ from dataclasses import replace
 import pytest
 from paper_example import paper_example
 
+from flowchart2sdnn.diagram.dump import with_values
 from flowchart2sdnn.diagram.validate import load_diagram
-from flowchart2sdnn.identify.chartio import fix_from_result, with_values
+from flowchart2sdnn.identify.chartio import fix_from_result
 from flowchart2sdnn.identify.run import IdentifySettings, identify
 
 

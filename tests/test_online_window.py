@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 from feedback_neuron import feedback_neuron, hand_run
 
-from flowchart2sdnn.fit.online import OnlineOptions, OnlineRun, quasi_online
+from flowchart2sdnn.identify.online import OnlineOptions, OnlineRun, quasi_online
 from flowchart2sdnn.network import online_kernel as ok
 from flowchart2sdnn.network.randomnet import random_gdnn
 from flowchart2sdnn.network.runtime import CompiledNetwork

@@ -14,8 +14,8 @@ import pytest
 from paper_example import paper_example
 
 from flowchart2sdnn.analysis.lint import lint_diagram
-from flowchart2sdnn.data.continuous import simulate_continuous
 from flowchart2sdnn.diagram.validate import load_diagram
+from flowchart2sdnn.simulate.continuous import simulate_continuous
 
 REPO = Path(__file__).resolve().parents[1]
 CHARTS = REPO / "diagrams" / "paper"

@@ -14,19 +14,17 @@ from flowchart2sdnn.cli import main
 from flowchart2sdnn.data.csvdata import read_csv
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
-from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
-from flowchart2sdnn.identify.problem import build_problem, required_columns
-from flowchart2sdnn.identify.run import IdentifySettings, identify
-from flowchart2sdnn.parallel import (
+from flowchart2sdnn.executors import (
     DASK_HINT,
     DaskExecutor,
     ProcessExecutor,
     SerialExecutor,
-    _problem,
-    fit_start,
-    fit_task,
     make_executor,
 )
+from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
+from flowchart2sdnn.identify.problem import build_problem, required_columns
+from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.identify.workers import _problem, fit_start, fit_task
 
 SETTINGS = IdentifySettings(starts=4, seed=7, max_iter=12)
 

@@ -90,7 +90,7 @@ def _rk4_owner_model(p: dict[str, float], u: np.ndarray, v0: tuple[float, float]
 
 def test_owner_model_validates_on_square_1p5V(owner_fit):
     """Acceptance: >= 80 % free-run fit on the held-out square_1p5V record for both carts."""
-    from flowchart2sdnn.alignment import run_aligned
+    from flowchart2sdnn.network.alignment import run_aligned
 
     rec = _columns("square_1p5V")
     compiled = owner_fit.problem.compiled
@@ -104,9 +104,9 @@ def test_owner_model_validates_on_square_1p5V(owner_fit):
 
 
 def test_library_metric_is_the_fit_formula(owner_fit):
-    from flowchart2sdnn.alignment import run_aligned
     from flowchart2sdnn.data.csvdata import read_csv
     from flowchart2sdnn.identify.problem import metrics
+    from flowchart2sdnn.network.alignment import run_aligned
 
     mapping = {"u": "u_V", "v1": "v1_cart1_mm_s", "v2": "v2_cart2_mm_s"}
     data = read_csv(DATA / "sine_2Hz.csv", ["u", "v1", "v2"], mapping, 0.001)
@@ -123,7 +123,7 @@ def test_identified_parameters_hold_in_continuous_time(owner_fit):
 
     So the values are those of the continuous model, not an artefact of the 1 ms Euler network.
     """
-    from flowchart2sdnn.alignment import run_aligned
+    from flowchart2sdnn.network.alignment import run_aligned
 
     p = _values(owner_fit)
     assert all(v > 0 for v in p.values())

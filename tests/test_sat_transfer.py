@@ -3,9 +3,9 @@
 import numpy as np
 
 from flowchart2sdnn.compiler import compile_diagram
-from flowchart2sdnn.data.continuous import simulate_continuous
 from flowchart2sdnn.diagram.validate import diagram_from_text
 from flowchart2sdnn.network.runtime import CompiledNetwork
+from flowchart2sdnn.simulate.continuous import simulate_continuous
 
 CHART = """
 sdnn: 1
@@ -64,7 +64,7 @@ def test_sat_continuous_oracle_clips():
 def test_sat_in_the_quasi_online_kernel_matches_the_runtime():
     """The online kernel runs its own copy of the network: on noise-free data made by the runtime at the true
     values, it must see zero error (a wrong clip would leave a residual and move the parameters)."""
-    from flowchart2sdnn.fit.online import OnlineOptions, quasi_online
+    from flowchart2sdnn.identify.online import OnlineOptions, quasi_online
 
     d = diagram_from_text(CHART)
     cn = CompiledNetwork(compile_diagram(d).network)

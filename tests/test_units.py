@@ -9,7 +9,6 @@ import pytest
 from hypothesis import given, settings
 from hypothesis import strategies as st
 
-from flowchart2sdnn.diagram.expr import parse_expr
 from flowchart2sdnn.diagram.units import (
     DIMENSIONLESS,
     SYMBOLS,
@@ -18,6 +17,7 @@ from flowchart2sdnn.diagram.units import (
     parse_unit,
     unit_of_expr,
 )
+from flowchart2sdnn.expr import parse_expr
 
 
 def U(kg=0, m=0, s=0, A=0, K=0, mol=0, cd=0, scale=1.0) -> Unit:

@@ -19,10 +19,10 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..diagram.expr import Expr, ExprError
 from ..diagram.model import Block, Diagram
 from ..diagram.units import DIMENSIONLESS, Unit, UnitError, parse_unit, unit_of_expr
 from ..errors import Diagnostic, Location
+from ..expr import Expr, ExprError
 from .graph import chart_graph, distances
 from .loops import find_algebraic_loops
 

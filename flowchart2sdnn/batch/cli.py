@@ -107,9 +107,9 @@ def register(main: click.Group) -> None:
         from ..atomic import check_output_path
         from ..data.csvdata import parse_mapping
         from ..diagram.validate import load_diagram
+        from ..executors import make_executor
         from ..identify.chartio import fix_from_result
         from ..identify.run import IdentifySettings
-        from ..parallel import make_executor
         from .run import BatchSettings, run_batch
 
         if workers and scheduler and scheduler != "local":
@@ -159,7 +159,7 @@ def register(main: click.Group) -> None:
         Drive and day come from file names such as drive07_day012.csv, pump-3_2024-05-01.csv or
         drive07/2024-05-01.csv (see --group for others).
         """
-        from .report import drift_table, effects_table, load_fleet, plots_available, write_report
+        from .drift import drift_table, effects_table, load_fleet, plots_available, write_report
 
         fleet = load_fleet(results, group)
         drift = drift_table(fleet, threshold=threshold, t_min=t_min, ci_factor=ci_factor)

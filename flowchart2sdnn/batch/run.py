@@ -27,8 +27,8 @@ from dataclasses import asdict, dataclass, field
 from ..data.csvdata import Dataset, read_csv
 from ..diagram.model import Diagram
 from ..errors import SdnnError
+from ..executors import Executor, SerialExecutor
 from ..identify.run import IdentifySettings
-from ..parallel import Executor, SerialExecutor
 from .results import Columns, ResultsWriter, columns_for, read_results
 
 __all__ = ["BatchSettings", "BatchSummary", "FileUnit", "run_batch", "identify_file", "config_key",
@@ -91,7 +91,7 @@ class FileUnit:
 
 def config_key(diagram: Diagram, settings: BatchSettings) -> str:
     """A short hash of what makes two rows comparable: the chart (after --fix-from) and the settings."""
-    from ..identify.chartio import dump_diagram
+    from ..diagram.dump import dump_diagram
 
     h = hashlib.sha256(dump_diagram(diagram).encode())
     h.update(json.dumps(asdict(settings.identify), sort_keys=True, default=list).encode())
@@ -249,7 +249,7 @@ def run_batch(diagram: Diagram, files: Sequence[str], output: str, settings: Bat
         RESULTS.csv or RESULTS.parquet; created, or resumed when it exists.
     settings : BatchSettings
     executor : Executor, optional
-        Where the fits run (:func:`flowchart2sdnn.parallel.make_executor`); serial when None.
+        Where the fits run (:func:`flowchart2sdnn.executors.make_executor`); serial when None.
     progress : callable ``progress(done, total, row)``, optional
         Called after each file (``row`` None for a skipped file).
 

@@ -17,9 +17,9 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..analysis.loops import LoopReport
-from ..diagram.expr import Expr, Num, const, mul, neg
 from ..diagram.model import Block, Diagram
 from ..errors import SdnnError
+from ..expr import Expr, Num, const, mul, neg
 
 __all__ = ["Source", "Connection", "NeuronBlock", "DiscreteChart", "discretize", "NEURON_KINDS"]
 

@@ -7,9 +7,9 @@ import math
 import networkx as nx
 
 from ..analysis.loops import LoopReport
-from ..diagram.expr import MAX_DEPTH, Expr, ExprError, parse_expr
 from ..diagram.model import Diagram
 from ..errors import SdnnError
+from ..expr import MAX_DEPTH, Expr, ExprError, parse_expr
 from ..network.model import (
     DelayedEdge,
     FreeWeightSpec,

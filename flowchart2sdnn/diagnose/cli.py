@@ -98,14 +98,14 @@ def register(main: click.Group) -> None:
         chart, refit, and report the error before and after."""
         from ..atomic import atomic_write_text, check_output_path
         from ..data.csvdata import parse_mapping, read_csv
+        from ..diagram.dump import dump_diagram
         from ..diagram.validate import load_diagram
-        from ..identify.chartio import dump_diagram
         from ..identify.cli import Progress
         from ..identify.problem import required_columns
         from .effects import builtin_effects, select_effects
         from .loop import DiagnoseSettings
         from .loop import diagnose as run_diagnose
-        from .report import format_report
+        from .summary import format_report
 
         if validation and split:
             raise click.UsageError("give either --validate or --split, not both")
@@ -143,7 +143,7 @@ def register(main: click.Group) -> None:
         executor = None
         try:
             if workers is not None or scheduler is not None:
-                from ..parallel import make_executor
+                from ..executors import make_executor
 
                 executor = make_executor(workers, scheduler)
             outcome = run_diagnose(diagram, train if len(train) > 1 else train[0], val, settings, effects, progress,

@@ -38,9 +38,9 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Protocol, runtime_checkable
 
-from ..diagram.expr import parse_expr
 from ..diagram.model import Block, Diagram, NonlinearWeights, Parameter, Term
 from ..errors import SdnnError, did_you_mean
+from ..expr import parse_expr
 from .graph import (
     Place,
     add_blocks,

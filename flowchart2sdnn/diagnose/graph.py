@@ -18,8 +18,8 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from ..diagram.expr import ExprError
 from ..diagram.model import Block, Diagram, Parameter, Term
+from ..expr import ExprError
 
 __all__ = [
     "Place",

@@ -21,7 +21,7 @@ One round:
 AIC = N ln(SSE/N) + 2k and BIC = N ln(SSE/N) + k ln N on the training record, N the number of residuals, k
 the free quantities plus one per scanned discrete choice (a dead time's n, a cogging harmonic).
 Never prints: progress goes through ``progress(text, fraction)``. The brief refits of a round are independent
-work units (:func:`refit_unit`): an executor (:mod:`flowchart2sdnn.parallel`) runs them in worker processes or on
+work units (:func:`refit_unit`): an executor (:mod:`flowchart2sdnn.executors`) runs them in worker processes or on
 a Dask cluster with the same results as in this process.
 """
 
@@ -390,7 +390,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
     effects : sequence of Effect, optional
         The library to try (default: every built-in effect).
     progress : callable(text, fraction), optional
-    executor : a :mod:`flowchart2sdnn.parallel` executor, optional
+    executor : a :mod:`flowchart2sdnn.executors` executor, optional
         Runs the brief refits of each round (two work units per refitted candidate); in this process when None.
 
     Returns

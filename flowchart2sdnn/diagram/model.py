@@ -13,7 +13,7 @@ from typing import TYPE_CHECKING
 from ..errors import Location
 
 if TYPE_CHECKING:  # pragma: no cover
-    from .expr import Expr
+    from ..expr import Expr
 
 __all__ = [
     "FORMAT_VERSION",

@@ -26,7 +26,7 @@ from fractions import Fraction
 from types import MappingProxyType
 
 from ..errors import did_you_mean
-from .expr import BinOp, Expr, ExprError, Neg, Num, Var
+from ..expr import BinOp, Expr, ExprError, Neg, Num, Var
 
 __all__ = ["UnitError", "Unit", "BASE_SYMBOLS", "DIMENSIONLESS", "SYMBOLS", "parse_unit", "unit_of_expr"]
 

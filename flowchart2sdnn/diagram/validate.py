@@ -14,7 +14,7 @@ from collections.abc import Mapping
 from pathlib import Path
 
 from ..errors import Diagnostic, Location, SdnnError, did_you_mean
-from .expr import ExprError, parse_expr
+from ..expr import ExprError, parse_expr
 from .model import (
     BLOCK_KINDS,
     FORMAT_VERSION,

@@ -1,121 +1,18 @@
-"""Charts in and out of identification: write a chart back as YAML, apply or fix values from a result file."""
+"""Values from a result file into a chart: read RESULT.json, apply or fix its values (the paper's stages)."""
 
 from __future__ import annotations
 
 import json
 import math
-from collections.abc import Mapping
-from dataclasses import replace
 from pathlib import Path
 
-import yaml
-
-from ..diagram.model import Block, Diagram, NonlinearWeights
+from ..diagram.dump import with_values
+from ..diagram.model import Diagram
 from ..errors import SdnnError
 
-__all__ = ["dump_diagram", "with_values", "load_result", "apply_result_file", "fix_from_result", "RESULT_FORMAT"]
+__all__ = ["load_result", "apply_result_file", "fix_from_result", "RESULT_FORMAT"]
 
 RESULT_FORMAT = "sdnn-result"
-
-
-def _num(x: float) -> float | int:
-    return int(x) if float(x).is_integer() and abs(x) < 1e15 else float(x)
-
-
-def _block_dict(b: Block) -> dict:
-    d: dict = {"type": b.kind}
-    if b.kind != "constant":
-        terms = [str(t) for t in b.inputs]
-        d["in"] = terms if b.kind == "sum" else terms[0]
-    if b.k is not None:
-        d["k"] = _num(b.k.evaluate({})) if b.k.is_constant else str(b.k)
-    if b.kind == "integrator" and b.init not in (None, 0.0):
-        d["init"] = b.init if b.init == "data" else _num(b.init)
-    if b.kind == "delay" and b.n not in (None, 1):
-        d["n"] = b.n
-    if b.kind == "function":
-        d["f"] = b.f
-        if b.eps is not None:
-            d["eps"] = _num(b.eps)
-    if b.kind == "nonlinear":
-        d["neurons"] = b.neurons
-        if b.bias:
-            d["bias"] = True
-        if b.init_range not in (None, (-0.5, 0.5)):
-            d["init_range"] = [_num(x) for x in b.init_range]
-        if b.fixed:
-            d["fixed"] = True
-        if b.weights is not None:
-            w = {"a": [float(x) for x in b.weights.a], "v": [float(x) for x in b.weights.v]}
-            if b.weights.b is not None and b.bias:
-                w["b"] = [float(x) for x in b.weights.b]
-            d["weights"] = w
-    if b.unit:
-        d["unit"] = b.unit
-    if b.description:
-        d["description"] = b.description
-    return d
-
-
-def dump_diagram(diagram: Diagram, identified: Mapping | None = None) -> str:
-    """The chart as format-1 YAML (what `load_diagram` reads back to an equal Diagram)."""
-    doc: dict = {"sdnn": 1, "name": diagram.name}
-    if diagram.description:
-        doc["description"] = diagram.description
-    doc["sample_time"] = _num(diagram.sample_time)
-
-    def signals(items):
-        out = {}
-        for s in items:
-            spec = {}
-            if s.unit:
-                spec["unit"] = s.unit
-            if s.description:
-                spec["description"] = s.description
-            out[s.name] = spec
-        return out
-
-    doc["inputs"] = signals(diagram.inputs)
-    doc["outputs"] = signals(diagram.outputs)
-    params = {}
-    for p in diagram.parameters:
-        spec: dict = {"init": _num(p.init)}
-        for key in ("unit", "min", "max"):
-            value = getattr(p, key)
-            if value is not None:
-                spec[key] = _num(value) if isinstance(value, float) else value
-        if p.fixed:
-            spec["fixed"] = True
-        if p.description:
-            spec["description"] = p.description
-        params[p.name] = spec
-    doc["parameters"] = params
-    doc["blocks"] = {b.name: _block_dict(b) for b in diagram.blocks}
-    if identified:
-        doc["identified"] = dict(identified)
-    return yaml.safe_dump(doc, sort_keys=False, default_flow_style=None, width=120, allow_unicode=True)
-
-
-def with_values(diagram: Diagram, parameters: Mapping[str, float], nonlinear: Mapping[str, Mapping],
-                fix: bool = False) -> Diagram:
-    """A new chart whose parameter inits and nonlinear weights are the given values (fixed when `fix`)."""
-    params = []
-    for p in diagram.parameters:
-        if p.name in parameters:
-            value = float(parameters[p.name])
-            lo = p.min if p.min is None or value >= p.min else value
-            hi = p.max if p.max is None or value <= p.max else value
-            p = replace(p, init=value, min=lo, max=hi, fixed=p.fixed or fix)
-        params.append(p)
-    blocks = []
-    for b in diagram.blocks:
-        if b.kind == "nonlinear" and b.name in nonlinear:
-            w = nonlinear[b.name]
-            b = replace(b, weights=NonlinearWeights(tuple(w["a"]), tuple(w["v"]),
-                                                    tuple(w["b"]) if w.get("b") is not None else None),
-                        fixed=bool(b.fixed or fix))
-        blocks.append(b)
-    return replace(diagram, parameters=tuple(params), blocks=tuple(blocks))
 
 
 def load_result(path: str | Path) -> dict:

@@ -117,13 +117,14 @@ def register(main: click.Group) -> None:
         together, each simulated from its own initial state)."""
         from ..atomic import atomic_write_text, check_output_path
         from ..data.csvdata import parse_mapping, read_csv
+        from ..diagram.dump import dump_diagram
         from ..diagram.validate import load_diagram
         from ..errors import SdnnError
-        from .chartio import dump_diagram, fix_from_result
+        from .chartio import fix_from_result
         from .problem import required_columns
-        from .report import format_result
         from .run import IdentifySettings
         from .run import identify as run_identify
+        from .summary import format_result
 
         if validation and split:
             raise click.UsageError("give either --validate or --split, not both")
@@ -154,7 +155,7 @@ def register(main: click.Group) -> None:
             if workers is None and scheduler is None:
                 outcome = run_identify(diagram, train, val, settings, progress, stop=ctrl_c)
             else:
-                from ..parallel import make_executor
+                from ..executors import make_executor
 
                 with make_executor(workers, scheduler) as executor:
                     outcome = run_identify(diagram, train, val, settings, progress, executor=executor,

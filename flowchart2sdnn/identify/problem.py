@@ -8,11 +8,11 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from ..alignment import fitted_rows, network_inputs, run_aligned
 from ..compiler import compile_diagram
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
+from ..network.alignment import fitted_rows, network_inputs, run_aligned
 from ..network.model import Network
 from ..network.runtime import CompiledNetwork
 from ..network.stability import rest_radii

@@ -18,12 +18,13 @@ import numpy as np
 
 from .. import __version__
 from ..data.csvdata import Dataset
+from ..diagram.dump import with_values
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..fit.lm import LMOptions, LMResult, levenberg_marquardt
 from ..fit.multistart import draw_starts, run_multistart
 from ..fit.uncertainty import covariance
-from .chartio import RESULT_FORMAT, with_values
+from .chartio import RESULT_FORMAT
 from .problem import CHATTER_LIMIT, GROWTH_LIMIT, Problem, build_problem, metrics
 
 __all__ = ["IdentifySettings", "Identification", "identify", "RESULT_VERSION"]
@@ -96,7 +97,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
              executor=None, stop: Callable[[], bool] | None = None) -> Identification:
     """Identify the chart's free quantities from `train`; see the module docstring.
 
-    `executor` (a :mod:`flowchart2sdnn.parallel` executor, optional) runs the multi-start fits in worker
+    `executor` (a :mod:`flowchart2sdnn.executors` executor, optional) runs the multi-start fits in worker
     processes or on a Dask cluster; the result is the same as without it (progress then comes per start).
     `stop` (optional) is polled after each LM iteration, start and online chunk; when it returns True the
     run ends early with status "interrupted" and the best point so far (the CLI's Ctrl-C).
@@ -160,7 +161,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
             return bool(stop and stop())
 
         if executor is not None:
-            from ..parallel import fit_start, fit_task
+            from .workers import fit_start, fit_task
 
             fit_one = functools.partial(fit_start, fit_task(problem, lower, upper, options))
         ms = run_multistart(fit_one, starts, callback=start_done, executor=executor)
@@ -297,7 +298,7 @@ def _online(problem: Problem, x0, lower, upper, settings: IdentifySettings, prog
     With several starts each run is a whole quasi-online pass; the one with the lowest mean window cost at
     the end of the record (the paper's error of a run) is reported, as a bank of online estimators would.
     """
-    from ..fit.online import OnlineOptions, OnlineStart, quasi_online
+    from .online import OnlineOptions, OnlineStart, quasi_online
 
     opts = OnlineOptions(window=min(settings.window, len(problem.inputs)),
                          average=settings.average, every=settings.every, start=settings.online_start)
@@ -317,7 +318,7 @@ def _online(problem: Problem, x0, lower, upper, settings: IdentifySettings, prog
         return run_one(start, f"quasi-online, start {next(counter)}/{n}")
 
     if executor is not None:
-        from ..parallel import fit_task, online_start
+        from .workers import fit_task, online_start
 
         fit_one = functools.partial(online_start, fit_task(problem, lower, upper, opts))
 
@@ -439,7 +440,7 @@ def _identifiability_warnings(cov, problem: Problem) -> list[str]:
 def _combined(per_record: list[dict], problem: Problem, x: np.ndarray, records: list[Dataset],
               alignment: str) -> dict:
     """Training metrics over several records: E summed, RMS and fit % over all their scored samples."""
-    from ..alignment import fitted_rows, run_aligned
+    from ..network.alignment import fitted_rows, run_aligned
     from .problem import data_init
 
     names = problem.compiled.output_names

@@ -170,7 +170,7 @@ class Network:
         free: Mapping[str, float] | None = None,
     ) -> np.ndarray:
         """Value of every weight (in `weights` order) at the given parameter and free-weight values."""
-        from ..diagram.expr import parse_expr  # local: the network file only needs it to evaluate
+        from ..expr import parse_expr  # local: the network file only needs it to evaluate
 
         env = self.parameter_values()
         if parameters:

@@ -4,7 +4,7 @@ One call of :func:`online_chunk` advances the run over samples ``[t0, t1)``; all
 caller allocates once (:func:`new_state`) and the kernel mutates, so a run can be cut into chunks (progress,
 Ctrl-C) without changing a single number. Two algorithms share the window and the model:
 
-**Window mode** (``tries >= 1``, the default of :class:`flowchart2sdnn.fit.online.OnlineOptions`). The model
+**Window mode** (``tries >= 1``, the default of :class:`flowchart2sdnn.identify.online.OnlineOptions`). The model
 runs free with the accepted parameters u and RTRL; every sample's row (``J``, ``e``) enters the FIFO window of Q
 rows together with the network state before that sample. Every ``block`` samples from ``start`` on (fewer
 while the window fills: ``max(min_block, block * rows / Q)``, an iteration costs in proportion to the rows) one

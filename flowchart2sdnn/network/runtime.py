@@ -17,7 +17,7 @@ from collections.abc import Mapping, Sequence
 
 import numpy as np
 
-from ..diagram.expr import parse_expr
+from ..expr import parse_expr
 from .flat import FlatNetwork, flatten, signal_names
 from .kernels import jacobian_kernel, simulate_kernel
 from .model import Network

@@ -13,7 +13,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from ..diagram.expr import BinOp, Neg, Num, Var
+from ..expr import BinOp, Neg, Num, Var
 from .runtime import CompiledNetwork
 
 __all__ = ["WeightProgram", "weight_program", "eval_weights"]

@@ -33,7 +33,7 @@ class ExcitationSettings:
 
     `input` is the excited chart input (default: the first); every other input is zero. `speed` is the
     signal the relay measures (default: the first output). The relay is described in
-    :class:`~flowchart2sdnn.data.continuous.RelayFeedback`; ``relay_level = 0`` switches it off.
+    :class:`~flowchart2sdnn.simulate.continuous.RelayFeedback`; ``relay_level = 0`` switches it off.
     """
 
     seconds: float
@@ -124,7 +124,7 @@ def excite(
     settings : ExcitationSettings
         Length, seed, APRBS, relay and noise options.
     parameters, init, nonlinear, substeps
-        As in :func:`~flowchart2sdnn.data.continuous.simulate_continuous`.
+        As in :func:`~flowchart2sdnn.simulate.continuous.simulate_continuous`.
 
     Returns
     -------

@@ -28,9 +28,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..fit.transforms import Bounds
 from ..network import online_kernel as ok
 from ..network.runtime import CompiledNetwork
-from .transforms import Bounds
 
 __all__ = ["OnlineOptions", "OnlineResult", "OnlineRun", "OnlineStart", "quasi_online", "STATUS_MESSAGES"]
 

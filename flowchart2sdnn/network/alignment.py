@@ -12,7 +12,7 @@ from collections.abc import Mapping
 
 import numpy as np
 
-from .network.model import Network
+from .model import Network
 
 __all__ = ["ALIGNMENTS", "network_inputs", "fitted_rows", "history_outputs", "run_aligned"]
 

@@ -4,7 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..report import table
+from ..tables import table
 
 __all__ = ["format_result"]
 

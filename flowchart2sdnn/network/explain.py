@@ -1,12 +1,10 @@
-"""Text renderings of library objects (explain, DOT, tables). Pure functions: they return strings."""
+"""Text renderings of a compiled network: every weight as an equation, the neuron graph as DOT. Pure functions."""
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from .model import Network
 
-from .network.model import Network
-
-__all__ = ["explain_network", "network_dot", "table"]
+__all__ = ["explain_network", "network_dot"]
 
 
 def _weight_label(net: Network, j: int) -> str:
@@ -99,21 +97,3 @@ def network_dot(net: Network) -> str:
 def _dot_text(text: str) -> str:
     """Text inside a DOT double-quoted string: a chart name may hold quotes, backslashes or line breaks."""
     return text.replace("\\", "\\\\").replace('"', '\\"').replace("\r", "").replace("\n", "\\n")
-
-
-def table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
-    """A plain aligned text table."""
-    cells = [[str(h) for h in headers]] + [[_fmt(c) for c in r] for r in rows]
-    widths = [max(len(r[i]) for r in cells) for i in range(len(headers))]
-    out = []
-    for n, r in enumerate(cells):
-        out.append("  ".join(c.ljust(w) for c, w in zip(r, widths, strict=True)).rstrip())
-        if n == 0:
-            out.append("  ".join("-" * w for w in widths))
-    return "\n".join(out) + "\n"
-
-
-def _fmt(value: object) -> str:
-    if isinstance(value, float):
-        return f"{value:.6g}"
-    return "" if value is None else str(value)

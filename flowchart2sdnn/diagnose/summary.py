@@ -2,8 +2,8 @@
 
 from __future__ import annotations
 
-from ..identify.report import format_result
-from ..report import table
+from ..identify.summary import format_result
+from ..tables import table
 
 __all__ = ["format_report", "STOP_MESSAGES"]
 

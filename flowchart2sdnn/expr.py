@@ -27,7 +27,7 @@ import re
 from collections.abc import Callable, Collection, Iterator, Mapping
 from dataclasses import dataclass
 
-from ..errors import did_you_mean
+from .errors import did_you_mean
 
 __all__ = ["ExprError", "Expr", "Num", "Var", "Neg", "BinOp", "parse_expr",
            "const", "add", "sub", "mul", "div", "power", "neg", "MAX_LENGTH", "MAX_DEPTH", "MAX_NODES"]

@@ -1,4 +1,8 @@
-"""Where fits run: in this process, in local worker processes, or on a Dask cluster.
+"""Where work runs: in this process, in local worker processes, or on a Dask cluster.
+
+Layer: bottom. This module imports nothing of ours but :mod:`flowchart2sdnn.errors`; the work units it runs
+(fitting one start, identifying one log file) live with the code they belong to and reach it as plain
+picklable callables.
 
 Every executor has the same small interface (:class:`Executor`): ``map`` (results in input order, as
 :func:`~flowchart2sdnn.fit.multistart.run_multistart` consumes them), ``submit`` and ``as_completed`` (for
@@ -13,13 +17,6 @@ work whose results may arrive in any order, as in ``sdnn batch``), and ``close``
   ``"local"`` for a :class:`distributed.LocalCluster` of ``workers`` processes on this machine. Dask is an
   optional extra (``pip install flowchart2sdnn[dask]``) and must be installed on the workers too.
 
-A work unit of a multi-start fit is a :class:`FitTask` (the network file as JSON, the aligned data arrays and
-the rest of the fitting problem, the bounds and LM options) plus one start vector; :func:`fit_start` rebuilds the
-:class:`~flowchart2sdnn.identify.problem.Problem` in the worker (once per worker: a small cache keyed by the
-task's hash) and runs :func:`~flowchart2sdnn.fit.lm.levenberg_marquardt` exactly as a serial run does, so
-the same seed gives bit-identical results on every executor. Results come back as the same frozen
-:class:`~flowchart2sdnn.fit.lm.LMResult` objects (arrays read-only again after unpickling).
-
 Workers ignore SIGINT: Ctrl-C interrupts the parent, which stops collecting results and shuts the
 workers down (:meth:`Executor.close` with ``cancel=True``).
 """
@@ -28,21 +25,15 @@ from __future__ import annotations
 
 import concurrent.futures as cf
 import dataclasses
-import hashlib
 import multiprocessing
 import os
-import pickle
 import signal
-import threading
-from collections import OrderedDict
 from collections.abc import Callable, Iterable, Iterator
-from dataclasses import dataclass
 from typing import Any
 
 import numpy as np
 
 from .errors import SdnnError
-from .fit.lm import LMResult, levenberg_marquardt
 
 __all__ = [
     "Executor",
@@ -51,16 +42,13 @@ __all__ = [
     "DaskExecutor",
     "make_executor",
     "start_method",
-    "FitTask",
-    "fit_task",
-    "fit_start",
-    "online_start",
     "DASK_HINT",
 ]
 
 DASK_HINT = "pip install flowchart2sdnn[dask]"
-# Problems kept per worker process: a multi-start needs one, a batch worker moves from file to file.
-_CACHE_SIZE = 4
+#: Modules the forkserver imports once, so that every worker starts with the package and its kernels loaded
+#: (names only: this module imports none of them).
+PRELOAD = ("flowchart2sdnn",)
 
 
 # ------------------------------------------------------------------------------------------------ results
@@ -178,7 +166,7 @@ class ProcessExecutor(Executor):
         ctx = multiprocessing.get_context(self.method)
         if self.method == "forkserver":
             # the server imports the package once; every worker forks from it with numba and the kernels loaded
-            ctx.set_forkserver_preload(["flowchart2sdnn.parallel", "flowchart2sdnn.identify.problem"])
+            ctx.set_forkserver_preload(list(PRELOAD))
         self._pool = cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx, initializer=_worker_init,
                                             initargs=(initializer,))
 
@@ -307,106 +295,3 @@ def make_executor(workers: int | None = None, scheduler: str | None = None) -> E
     if workers is None or workers == 1:
         return SerialExecutor()
     return ProcessExecutor(workers)
-
-
-# ------------------------------------------------------------------------------------------------ fit units
-#: Problem fields a worker rebuilds from the network file instead of receiving them (the chart is not needed).
-_REBUILT = ("diagram", "network", "compiled")
-
-
-@dataclass(frozen=True, eq=False)
-class FitTask:
-    """Everything a worker needs to run LM from any start: small, picklable, no callbacks.
-
-    Attributes
-    ----------
-    network_json : str      the network file (:meth:`Network.to_json`)
-    problem : dict          every other field of the Problem (aligned inputs and targets, initial states,
-                            alignment, the guard's stability floor, further records, ...), as identify built it
-    names : tuple of str    theta order (checked against the rebuilt network)
-    lower, upper : ndarray (P,) bounds
-    options : LMOptions (fit_start) or OnlineOptions (online_start)
-    key : str               sha256 of the network file and the problem fields: the worker's cache key
-                            (bounds and options are not cached, they travel with every unit)
-    """
-
-    network_json: str
-    problem: dict
-    names: tuple[str, ...]
-    lower: np.ndarray
-    upper: np.ndarray
-    options: Any  # LMOptions or fit.online.OnlineOptions
-    key: str
-
-
-def fit_task(problem, lower: np.ndarray, upper: np.ndarray, options: Any) -> FitTask:
-    """The work unit of a multi-start fit of ``problem`` (an identify.problem.Problem).
-
-    Every field of the Problem but the chart and the compiled network travels as it is, so that the worker's
-    Problem behaves exactly as the caller's (a field added to Problem later travels too).
-    """
-    fields = {f.name: getattr(problem, f.name) for f in dataclasses.fields(problem) if f.name not in _REBUILT}
-    text = problem.network.to_json()
-    h = hashlib.sha256(text.encode())
-    h.update(pickle.dumps(fields, protocol=pickle.HIGHEST_PROTOCOL))
-    return FitTask(text, fields, tuple(problem.names), np.array(lower, dtype=float), np.array(upper, dtype=float),
-                   options, h.hexdigest())
-
-
-_cache: OrderedDict[str, Any] = OrderedDict()
-_cache_lock = threading.Lock()
-
-
-def _problem(task: FitTask):
-    """The Problem of a task, built once per worker process (thread-safe for in-process Dask workers)."""
-    from .identify.problem import Problem
-    from .network.model import Network
-    from .network.runtime import CompiledNetwork
-
-    with _cache_lock:
-        problem = _cache.get(task.key)
-        if problem is not None:
-            _cache.move_to_end(task.key)
-            return problem
-    network = Network.from_json(task.network_json)
-    compiled = CompiledNetwork(network)
-    if tuple(compiled.names) != task.names:
-        raise RuntimeError(f"the rebuilt network fits {compiled.names}, the task expects {task.names}")
-    # the chart itself is not needed to run LM; the worker never sees it
-    problem = Problem(diagram=None, network=network, compiled=compiled, **task.problem)
-    with _cache_lock:
-        _cache[task.key] = problem
-        while len(_cache) > _CACHE_SIZE:
-            _cache.popitem(last=False)
-    return problem
-
-
-def fit_start(task: FitTask, start: np.ndarray) -> LMResult:
-    """Levenberg-Marquardt from ``start`` on the task's problem (module-level: runs in any worker).
-
-    Parameters
-    ----------
-    task : FitTask
-    start : ndarray (P,)
-
-    Returns
-    -------
-    LMResult
-    """
-    problem = _problem(task).from_start(start)
-    return levenberg_marquardt(problem.fun, np.asarray(start, dtype=float), task.names, task.lower, task.upper,
-                               task.options, guard=problem.guard, residual=problem.residual)
-
-
-def online_start(task: FitTask, start: np.ndarray):
-    """Quasi-online identification from ``start`` on the task's problem (``task.options`` an OnlineOptions).
-
-    Returns
-    -------
-    flowchart2sdnn.fit.online.OnlineStart
-    """
-    from .fit.online import OnlineStart, quasi_online
-
-    problem = _problem(task)
-    return OnlineStart(quasi_online(problem.compiled, problem.inputs, problem.targets, np.asarray(start, dtype=float),
-                                    task.lower, task.upper, task.options, init=problem.init))
