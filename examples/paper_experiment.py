@@ -55,7 +55,7 @@ from flowchart2sdnn.diagram.model import Diagram  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt  # noqa: E402
 from flowchart2sdnn.fit.multistart import draw_starts, run_multistart  # noqa: E402
-from flowchart2sdnn.identify.chartio import fix_from_result  # noqa: E402
+from flowchart2sdnn.identify.document import fix_from_result  # noqa: E402
 from flowchart2sdnn.identify.problem import Problem, build_problem, required_columns  # noqa: E402
 from flowchart2sdnn.identify.run import IdentifySettings, identify  # noqa: E402
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402

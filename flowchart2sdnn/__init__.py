@@ -2,8 +2,83 @@
 
 A continuous signal flow chart (YAML) is linted, compiled into a structured General Dynamic Neural Network
 whose weights are physical parameters, and identified from measured data with Levenberg-Marquardt + RTRL.
+
+The public API (see the README's "Python API"):
+
+* :func:`load_chart`, :func:`compile_chart`: a chart file -> :class:`Diagram` -> compiled network
+* :func:`read_csv`, :func:`dataset_from_frame`: measured records (:class:`Dataset`)
+* :func:`identify` -> :class:`Identification` (``.parameters``, ``.chart``, ``.simulate()``, ``.to_json()``)
+* :func:`diagnose` -> :class:`Diagnosis`; :func:`read_result` reads a RESULT.json back
+
+Names are imported on first use, so ``import flowchart2sdnn`` (and the command line) stays fast.
 """
 
-__version__ = "0.1.0"
+from __future__ import annotations
 
-__all__ = ["__version__"]
+import importlib
+
+from . import diagnose as _diagnose_package  # noqa: F401
+from . import identify as _identify_package  # noqa: F401
+from ._version import __version__
+
+# The subpackages identify/ and diagnose/ are imported above (cheap: their modules load on first use) so that
+# the functions below, bound after them, keep the names `identify` and `diagnose` whatever is imported later.
+# Reach the subpackages' modules with `from flowchart2sdnn.identify import run`.
+
+__all__ = [
+    "__version__",
+    "load_chart",
+    "compile_chart",
+    "read_csv",
+    "dataset_from_frame",
+    "identify",
+    "diagnose",
+    "read_result",
+    "Diagram",
+    "Dataset",
+    "Compilation",
+    "IdentifySettings",
+    "Identification",
+    "Estimate",
+    "Curve",
+    "Metrics",
+    "DiagnoseSettings",
+    "Diagnosis",
+    "SdnnError",
+]
+
+_HOME = {
+    "load_chart": "api", "compile_chart": "api", "read_csv": "api", "dataset_from_frame": "api",
+    "read_result": "api",
+    "Diagram": "diagram.model", "Dataset": "data.csvdata", "Compilation": "compiler",
+    "IdentifySettings": "identify.settings", "Identification": "identify.result", "Estimate": "identify.result",
+    "Curve": "identify.result", "Metrics": "identify.result",
+    "DiagnoseSettings": "diagnose.loop", "Diagnosis": "diagnose.loop", "SdnnError": "errors",
+}
+
+
+def __getattr__(name: str):
+    home = _HOME.get(name)
+    if home is None:
+        raise AttributeError(f"module 'flowchart2sdnn' has no attribute {name!r}")
+    value = getattr(importlib.import_module(f".{home}", __name__), name)
+    globals()[name] = value
+    return value
+
+
+def __dir__() -> list[str]:
+    return sorted(set(globals()) | set(__all__))
+
+
+def identify(chart, data, validation=None, **settings):
+    """Identify a chart's physical parameters from measured records; see :func:`flowchart2sdnn.api.identify`."""
+    from .api import identify as run
+
+    return run(chart, data, validation, **settings)
+
+
+def diagnose(chart, data, validation=(), **settings):
+    """Find what a chart lacks from measured records; see :func:`flowchart2sdnn.api.diagnose`."""
+    from .api import diagnose as run
+
+    return run(chart, data, validation, **settings)

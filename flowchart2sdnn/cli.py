@@ -160,7 +160,7 @@ def simulate(chart, data, output, params, continuous, signals, alignment, mappin
         check_output_path(output, [chart, data] + ([params] if params else []), force=force)
     diagram = load_diagram(chart)
     if params:
-        from .identify.chartio import apply_result_file
+        from .identify.document import apply_result_file
 
         diagram = apply_result_file(diagram, params)
     maps = parse_mapping(mapping)

@@ -48,7 +48,7 @@ __all__ = [
 DASK_HINT = "pip install flowchart2sdnn[dask]"
 #: Modules the forkserver imports once, so that every worker starts with the package and its kernels loaded
 #: (names only: this module imports none of them).
-PRELOAD = ("flowchart2sdnn",)
+PRELOAD = ("flowchart2sdnn.api",)
 
 
 # ------------------------------------------------------------------------------------------------ results

@@ -75,7 +75,7 @@ def test_one_row_per_file_with_values_and_an_error_row(fleet, tmp_path):
 
 
 def test_a_failing_fit_is_an_error_row_not_a_lost_run(fleet, tmp_path, monkeypatch):
-    import flowchart2sdnn.identify.run as run_module
+    from flowchart2sdnn.identify import run as run_module
 
     real = run_module.identify
 
@@ -287,7 +287,7 @@ def test_diagnose_column_and_report_section(fleet, tmp_path, monkeypatch):
 
     diagnose() itself is replaced by a stand-in that 'finds' friction on drive B from day 1 (the real loop is
     exercised in the slow test below and in the diagnose package's own tests)."""
-    loop = pytest.importorskip("flowchart2sdnn.diagnose.loop")
+    from flowchart2sdnn.diagnose import loop
 
     class Found:
         def __init__(self, accepted):

@@ -8,9 +8,9 @@ import pytest
 from diagnose_bench import chart, record
 
 from flowchart2sdnn.diagnose import loop
-from flowchart2sdnn.diagnose.cli import _json_safe
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
+from flowchart2sdnn.strictjson import strict_json
 
 EXCITATION = {"amplitude": (-6.0, 6.0), "relay_level": 3.0, "relay_switch": 1.0, "relay_band": 0.2}
 
@@ -37,7 +37,7 @@ def test_ctrl_c_in_the_screen_returns_the_nominal_fit_marked_interrupted(monkeyp
     assert r["stop"] == "interrupted" and r["interrupted"] is True
     assert r["accepted"] == [] and r["rounds"] == []
     assert r["after"] == r["before"]  # the chart fitted before the interrupt is what is reported
-    json.dumps(_json_safe(r), allow_nan=False)
+    json.dumps(strict_json(r), allow_nan=False)
 
 
 def test_other_system_errors_are_not_taken_for_ctrl_c(monkeypatch):

@@ -15,10 +15,10 @@ from diagnose_bench import DATA, chart, record
 
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.data.csvdata import write_csv
-from flowchart2sdnn.diagnose.cli import _json_safe
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
 from flowchart2sdnn.diagram.validate import load_diagram
+from flowchart2sdnn.strictjson import strict_json
 
 NOISE = 0.02
 # the paper's relay is scaled for speeds of 10 rad/s; this mass moves at about 1 m/s
@@ -60,7 +60,7 @@ def test_the_report_follows_the_contract_and_is_strict_json(friction_case):
     assert all(keys <= set(x) for x in r["rounds"])
     assert all(set(a) >= {"effect", "at"} for a in r["accepted"])
     assert r["final"]["format"] == "sdnn-result" and "fric_v" in r["final"]["nonlinear"]
-    json.dumps(_json_safe(r), allow_nan=False)
+    json.dumps(strict_json(r), allow_nan=False)
     refitted = [c for c in r["candidates"] if c.get("refitted")]
     assert refitted and all(c["achieved_decrease"] is not None for c in refitted)
 

@@ -7,10 +7,10 @@ import json
 import pytest
 from diagnose_bench import chart, record
 
-from flowchart2sdnn.diagnose.cli import _json_safe
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose, refit_unit
 from flowchart2sdnn.executors import DaskExecutor, ProcessExecutor, SerialExecutor
+from flowchart2sdnn.strictjson import strict_json
 
 EXCITATION = {"amplitude": (-6.0, 6.0), "relay_level": 3.0, "relay_switch": 1.0, "relay_band": 0.2}
 EFFECTS = [BUILTIN_EFFECTS[n] for n in ("friction", "damping", "saturation")]
@@ -18,7 +18,7 @@ SETTINGS = DiagnoseSettings(rounds=1, top=3, refit_iter=15, max_iter=30)
 
 
 def _without_timing(report: dict) -> str:
-    return json.dumps(_json_safe({k: v for k, v in report.items() if k != "timing"}), sort_keys=True)
+    return json.dumps(strict_json({k: v for k, v in report.items() if k != "timing"}), sort_keys=True)
 
 
 @pytest.fixture(scope="module")

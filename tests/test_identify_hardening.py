@@ -21,8 +21,9 @@ from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
 from flowchart2sdnn.fit.lm import STATUS_MESSAGES
 from flowchart2sdnn.identify.problem import required_columns
-from flowchart2sdnn.identify.run import IdentifySettings, _json_safe, identify
+from flowchart2sdnn.identify.run import IdentifySettings, identify
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
+from flowchart2sdnn.strictjson import strict_json
 
 ROOT = Path(__file__).resolve().parents[1]
 DIAGRAMS = ROOT / "diagrams"
@@ -189,7 +190,7 @@ def test_parameters_that_only_appear_as_a_product_are_reported_not_crashed_on(da
 
 def test_non_finite_values_never_reach_the_document():
     bad: list[str] = []
-    doc = _json_safe({"a": [1.0, math.nan, {"b": math.inf}], "c": np.float64(-math.inf), "d": "x", "e": 2},
+    doc = strict_json({"a": [1.0, math.nan, {"b": math.inf}], "c": np.float64(-math.inf), "d": "x", "e": 2},
                      "", bad)
     assert doc == {"a": [1.0, None, {"b": None}], "c": None, "d": "x", "e": 2}
     assert bad == ["a[1]", "a[2].b", "c"]

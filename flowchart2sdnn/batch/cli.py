@@ -108,7 +108,7 @@ def register(main: click.Group) -> None:
         from ..data.csvdata import parse_mapping
         from ..diagram.validate import load_diagram
         from ..executors import make_executor
-        from ..identify.chartio import fix_from_result
+        from ..identify.document import fix_from_result
         from ..identify.run import IdentifySettings
         from .run import BatchSettings, run_batch
 

@@ -28,11 +28,11 @@ from ..data.csvdata import Dataset, read_csv
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..executors import Executor, SerialExecutor
+from ..identify.result import Identification
 from ..identify.run import IdentifySettings
 from .results import Columns, ResultsWriter, columns_for, read_results
 
-__all__ = ["BatchSettings", "BatchSummary", "FileUnit", "run_batch", "identify_file", "config_key",
-           "diagnose_available"]
+__all__ = ["BatchSettings", "BatchSummary", "FileUnit", "run_batch", "identify_file", "config_key"]
 
 
 @dataclass(frozen=True)
@@ -122,42 +122,33 @@ def _message(exc: BaseException) -> str:
     return f"{type(exc).__name__}: {' '.join(str(exc).split())[:500]}"
 
 
-def _row_from_result(result: dict, unit: FileUnit) -> dict:
+def _row_from_result(result: Identification, unit: FileUnit) -> dict:
     data = unit.data
     if data.time is not None and data.n_rows:
         t_start, t_end = float(data.time[0]), float(data.time[-1])
     else:
         t_start, t_end = 0.0, (data.n_rows - 1) * float(unit.diagram.sample_time)
-    train = result["fit"]["train"]
-    row = {"file": unit.file, "sha256": unit.sha256, "status": result["status"], "error": None,
-           "t_start": t_start, "t_end": t_end, "rows": data.n_rows, "cost": train.get("cost"),
-           "iterations": (result.get("optimizer") or {}).get("iterations"), "starts": unit.settings.starts,
-           "warnings": " | ".join(result.get("warnings") or []) or None, "config": unit.config}
+    train = result.fit.train
+    row = {"file": unit.file, "sha256": unit.sha256, "status": result.status, "error": None,
+           "t_start": t_start, "t_end": t_end, "rows": data.n_rows, "cost": train.cost,
+           "iterations": result.optimizer.iterations if result.optimizer else None, "starts": unit.settings.starts,
+           "warnings": " | ".join(result.warnings) or None, "config": unit.config}
     for o in unit.columns.outputs:
-        row[f"fit_{o}"] = train["fit_percent"].get(o)
+        row[f"fit_{o}"] = train.fit_percent.get(o)
     for p in unit.columns.parameters:
-        spec = result["parameters"].get(p) or {}
-        ci = spec.get("ci95") or (None, None)
-        row[p], row[f"{p}_lo"], row[f"{p}_hi"] = spec.get("value"), ci[0], ci[1]
+        est = result.parameters.get(p)
+        ci = (est.ci95 if est else None) or (None, None)
+        row[p], row[f"{p}_lo"], row[f"{p}_hi"] = est.value if est else None, ci[0], ci[1]
     return row
-
-
-def diagnose_available() -> bool:
-    """Whether flowchart2sdnn.diagnose (written separately) provides diagnose() in this installation."""
-    try:
-        from ..diagnose.loop import DiagnoseSettings, diagnose  # noqa: F401
-    except ImportError:
-        return False
-    return True
 
 
 def _effects(unit: FileUnit) -> str:
     """The effects diagnose() accepts on this file, as "label; label", or "none"."""
-    try:
-        from ..diagnose.loop import DiagnoseSettings, diagnose
+    from ..diagnose import loop  # looked up per call: diagnose is replaceable (tests stand in for it)
 
+    try:
         s = unit.settings
-        found = diagnose(unit.diagram, unit.data, (), DiagnoseSettings(max_iter=s.max_iter, alignment=s.alignment,
+        found = loop.diagnose(unit.diagram, unit.data, (), loop.DiagnoseSettings(max_iter=s.max_iter, alignment=s.alignment,
                                                                       seed=s.seed))
         accepted = found.report.get("accepted") or []
     except Exception as exc:  # noqa: BLE001 - the identification row stands; say why diagnosis failed
@@ -187,7 +178,7 @@ def identify_file(unit: FileUnit) -> dict:
     t0 = time.perf_counter()
     try:
         outcome = identify(unit.diagram, unit.data, None, unit.settings)
-        row = _row_from_result(outcome.result, unit)
+        row = _row_from_result(outcome, unit)
     except Exception as exc:  # noqa: BLE001 - a failed file is a row, never a lost run
         row = _error_row(unit.file, unit.sha256, unit.config, _message(exc))
     if unit.diagnose and row["status"] not in ("error", "interrupted"):
@@ -273,8 +264,6 @@ def _run(diagram: Diagram, files: Sequence[str], output: str, settings: BatchSet
     from ..identify.problem import required_columns
 
     t0 = time.perf_counter()
-    if settings.diagnose and not diagnose_available():
-        raise SdnnError.at("BATCH007", "--diagnose needs flowchart2sdnn.diagnose, which this installation lacks")
     columns = columns_for(diagram.parameter_names, diagram.output_names, diagnose=settings.diagnose)
     config = config_key(diagram, settings)
     kept, dropped = _existing(output, columns, config, settings.force)

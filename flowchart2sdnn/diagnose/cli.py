@@ -3,24 +3,14 @@
 from __future__ import annotations
 
 import json
-import math
 import sys
 from dataclasses import replace
 
 import click
 
+from ..strictjson import strict_json
+
 __all__ = ["register", "parse_effects"]
-
-
-def _json_safe(value):
-    """NaN and infinities become None: REPORT.json is strict JSON."""
-    if isinstance(value, float):
-        return value if math.isfinite(value) else None
-    if isinstance(value, dict):
-        return {str(k): _json_safe(v) for k, v in value.items()}
-    if isinstance(value, (list, tuple)):
-        return [_json_safe(v) for v in value]
-    return value
 
 
 def parse_effects(text: str | None) -> list[str] | None:
@@ -160,7 +150,7 @@ def register(main: click.Group) -> None:
         report = outcome.report
         report["command"] = {"data": list(data), "diagram": chart, "validate": list(validation),
                              "effects_file": effects_file, "output": output, "map": dict(maps)}
-        report_text = json.dumps(_json_safe(report), indent=1, allow_nan=False) + "\n"
+        report_text = json.dumps(strict_json(report), indent=1, allow_nan=False) + "\n"
         chart_text = dump_diagram(outcome.diagram, {"from": "sdnn diagnose", "chart": chart,
                                                     "accepted": [f"{a['effect']} at {a['at']}"
                                                                  + (f" ({a['label']})" if a["label"] else "")

@@ -191,7 +191,7 @@ def _identify(diagram: Diagram, train: list[Dataset], settings: DiagnoseSettings
 
 def _fitted(ident: Identification, records, settings: DiagnoseSettings, extra_dof: int, start: str,
             accepted: tuple) -> Fitted:
-    cost = ident.result["fit"]["train"]["cost"]
+    cost = ident.fit.train.cost
     cost = math.inf if cost is None else float(cost)
     return Fitted(ident, cost, ident.problem.n_residuals, len(ident.problem.names) + extra_dof,
                   _validate(ident, records, settings.alignment), start, accepted)
@@ -216,9 +216,9 @@ def _fit_growing(diagram: Diagram, train: list[Dataset], records, settings: Diag
             ident = _identify(diagram, [d.slice(0, h) if d.n_rows > h else d for d in train], settings, max_iter)
         except (SdnnError, ValueError, KeyError):
             break  # a stage the short parts cannot support: the fit on the whole records decides
-        if ident.result.get("status") == "interrupted":
+        if ident.status == "interrupted":
             return _fitted(ident, records, settings, extra_dof, start, accepted)
-        cost = ident.result["fit"]["train"]["cost"]
+        cost = ident.fit.train.cost
         if cost is None or not math.isfinite(cost):
             break  # diverged on a short stage: continue from where it was
         diagram = ident.diagram
@@ -269,10 +269,10 @@ def residual_analysis(fitted: Fitted, train: list[Dataset], settings: DiagnoseSe
 
 
 def _summary(f: Fitted) -> dict:
-    res = f.identification.result["fit"]["train"]
+    res = f.identification.fit.train
     val = f.validation["records"]
     return {"rms": _num(f.rms), "validation_rms": _num(f.validation_rms), "aic": _num(f.aic), "bic": _num(f.bic),
-            "cost": _num(f.cost), "k": f.k, "rms_per_output": res["rms"], "fit_percent": res["fit_percent"],
+            "cost": _num(f.cost), "k": f.k, "rms_per_output": dict(res.rms), "fit_percent": dict(res.fit_percent),
             "validation_rms_per_output": [m["rms"] for m in val],
             "validation_fit_percent": [m["fit_percent"] for m in val]}
 
@@ -368,7 +368,7 @@ def _split(train: list[Dataset], validation: Sequence[Dataset], split: float | N
 
 def _was_interrupted(fitted) -> bool:
     """The trainer turns Ctrl-C into an 'interrupted' result; diagnose must stop there too."""
-    return fitted is not None and fitted.identification.result.get("status") == "interrupted"
+    return fitted is not None and fitted.identification.status == "interrupted"
 
 
 def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: Sequence[Dataset] = (),
@@ -502,7 +502,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
         "after": _summary(current),
         "whiteness": {"before": residual_analysis(nominal, train, settings),
                       "after": residual_analysis(current, train, settings)},
-        "final": current.identification.result,
+        "final": current.identification.to_document(),
         "settings": {**settings.__dict__, "split": split, "effects": [e.name for e in effects]},
         "timing": {**timing, "total": time.perf_counter() - t_start},
     }
@@ -586,5 +586,5 @@ def _round_entry(r: int, s: Score, before: Fitted, after: Fitted | None, accepte
         "aic_before": _num(before.aic), "aic_after": _num(a.aic) if a else None,
         "bic_before": _num(before.bic), "bic_after": _num(a.bic) if a else None,
         "before": _summary(before), "after": _summary(a) if a else None,
-        "parameters": ({k: v["value"] for k, v in a.identification.result["parameters"].items()} if a else None),
+        "parameters": (a.identification.values if a else None),
     }

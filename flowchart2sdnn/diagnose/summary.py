@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+from ..identify.document import from_document
 from ..identify.summary import format_result
 from ..tables import table
 
@@ -101,7 +102,7 @@ def format_report(report: dict, limit: int = 10) -> str:
     out.append("residual after:  " + _whiteness(w.get("after")))
     out.append("")
     out.append("final chart:")
-    out.append(format_result(report["final"]).rstrip())
+    out.append(format_result(from_document(report["final"])).rstrip())
     return "\n".join(out) + "\n"
 
 

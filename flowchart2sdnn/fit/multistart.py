@@ -154,7 +154,7 @@ class MultiStartResult:
         return self.results[self.best_index]
 
     def summary(self) -> dict:
-        """JSON-ready summary for :class:`~flowchart2sdnn.fit.result.FitResult` ``starts``."""
+        """JSON-ready summary (the ``multistart`` entry of RESULT.json)."""
         return {
             "n": len(self.results),
             "best_index": self.best_index,

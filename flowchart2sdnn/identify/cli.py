@@ -2,7 +2,6 @@
 
 from __future__ import annotations
 
-import json
 import signal
 import sys
 import threading
@@ -120,7 +119,7 @@ def register(main: click.Group) -> None:
         from ..diagram.dump import dump_diagram
         from ..diagram.validate import load_diagram
         from ..errors import SdnnError
-        from .chartio import fix_from_result
+        from .document import dumps, fix_from_result
         from .problem import required_columns
         from .run import IdentifySettings
         from .run import identify as run_identify
@@ -162,7 +161,7 @@ def register(main: click.Group) -> None:
                                            stop=ctrl_c)
         finally:
             progress.close()
-        result = outcome.result
+        result = outcome.to_document()
         if result["status"] == "diverged_at_start":
             raise SdnnError.at("FIT001", result["message"], chart,
                                hint="the start values make the model unstable on this data: change 'init'")
@@ -172,7 +171,7 @@ def register(main: click.Group) -> None:
             result["identified_chart"] = chart_out
             # both texts first: a failure here must not leave one file without the other
             chart_text = dump_diagram(outcome.diagram, {"from": output, "status": result["status"]})
-            result_text = json.dumps(result, indent=1, allow_nan=False) + "\n"
+            result_text = dumps(result)
             atomic_write_text(chart_out, chart_text)
             atomic_write_text(output, result_text)
         if plots:
@@ -180,7 +179,7 @@ def register(main: click.Group) -> None:
 
             write_plots(outcome, plots)
         if not quiet:
-            click.echo(format_result(result, fixed), nl=False)
+            click.echo(format_result(outcome, fixed), nl=False)
             if output:
                 click.echo(f"wrote {output} and {chart_out}")
         if result["status"] == "interrupted":

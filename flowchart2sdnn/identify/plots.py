@@ -84,11 +84,11 @@ def _signal_values(name: str, sign: int, outcome, signals: dict, params: dict, d
     if block is None:
         return None
     if block.kind == "nonlinear":
-        weights = outcome.result["nonlinear"].get(name)
+        weights = outcome.curves.get(name)
         parts = [signals.get(f"{name}[{i}]") for i in range(block.neurons or 0)]
         if weights is None or any(p is None for p in parts):
             return None
-        return sign * sum(v * p for v, p in zip(weights["v"], parts, strict=True))
+        return sign * sum(v * p for v, p in zip(weights.v, parts, strict=True))
     if block.kind == "gain" and block.k is not None:
         x = _signal_values(block.inputs[0].signal, block.inputs[0].sign, outcome, signals, params, depth + 1)
         try:
@@ -123,15 +123,14 @@ def curve_input_range(outcome, block: str) -> tuple[float, float] | None:
     return (float(x.min()), float(x.max())) if x.size else None
 
 
-def _curve(weights: dict, x: np.ndarray) -> np.ndarray:
-    a = np.asarray(weights["a"], dtype=float)
-    v = np.asarray(weights["v"], dtype=float)
-    b = np.asarray(weights.get("b") or np.zeros_like(a), dtype=float)
+def _curve(weights, x: np.ndarray) -> np.ndarray:
+    a = np.asarray(weights.a, dtype=float)
+    v = np.asarray(weights.v, dtype=float)
+    b = np.asarray(weights.b or np.zeros_like(a), dtype=float)
     return np.tanh(np.outer(x, a) + b) @ v
 
 
 def _plot_output(outcome, t, y, yhat, names, directory: Path) -> Path:
-    result = outcome.result
     fig, axes = _figure(len(names) + 1)
     for i, name in enumerate(names):
         ax = axes[i]
@@ -142,20 +141,20 @@ def _plot_output(outcome, t, y, yhat, names, directory: Path) -> Path:
         ax.grid(alpha=0.3)
     axes[len(names) - 1].set_xlabel("time in s")
     ax = axes[-1]
-    online = result.get("online")
-    if online and online.get("cost"):
-        ax.plot(online["cost_time"], online["cost"], color="tab:blue", lw=0.9)
+    online = outcome.online
+    if online and online.cost:
+        ax.plot(online.cost_time, online.cost, color="tab:blue", lw=0.9)
         ax.set_xlabel("time in s")
         ax.set_ylabel("window cost E")
     else:
-        history = (result.get("optimizer") or {}).get("cost_history") or [result["fit"]["train"]["cost"] or 0.0]
+        history = (outcome.optimizer.cost_history if outcome.optimizer else None) or [outcome.fit.train.cost or 0.0]
         ax.plot(np.arange(len(history)), history, color="tab:blue", marker=".", lw=0.9)
         ax.set_xlabel("LM iteration")
         ax.set_ylabel("cost E")
     if all(c is not None and c > 0 for c in ax.get_lines()[0].get_ydata()):
         ax.set_yscale("log")
     ax.grid(alpha=0.3)
-    fig.suptitle(f"{outcome.diagram.name}: measured and model output, cost ({result['status']})")
+    fig.suptitle(f"{outcome.diagram.name}: measured and model output, cost ({outcome.status})")
     return _save(fig, directory / "output.png")
 
 
@@ -174,18 +173,18 @@ def _plot_residual(t, y, yhat, names, directory: Path) -> Path:
 
 
 def _plot_parameters(outcome, directory: Path) -> Path | None:
-    online = outcome.result.get("online")
+    online = outcome.online
     physical = [p.name for p in outcome.problem.network.parameters]
-    traj = (online or {}).get("trajectories", {})
+    traj = online.trajectories if online else {}
     names = [n for n in physical if n in traj]
-    if not names or not online.get("trajectory_time"):
+    if not names or not online.trajectory_time:
         return None
     fig, axes = _figure(len(names), height=2.0)
-    params = outcome.result["parameters"]
+    params = outcome.parameters
     for ax, name in zip(axes, names, strict=True):
-        ax.plot(online["trajectory_time"], traj[name], color="tab:green", lw=0.9)
-        ax.axhline(params[name]["value"], color="0.3", lw=0.6, ls=":", label=f"mean {params[name]['value']:.5g}")
-        unit = params[name].get("unit")
+        ax.plot(online.trajectory_time, traj[name], color="tab:green", lw=0.9)
+        ax.axhline(params[name].value, color="0.3", lw=0.6, ls=":", label=f"mean {params[name].value:.5g}")
+        unit = params[name].unit
         ax.set_ylabel(f"{name}" + (f" in {unit}" if unit else ""))
         ax.legend(loc="upper right", fontsize="small")
         ax.grid(alpha=0.3)
@@ -194,11 +193,11 @@ def _plot_parameters(outcome, directory: Path) -> Path | None:
     return _save(fig, directory / "parameters.png")
 
 
-def _plot_curve(outcome, block: str, weights: dict, directory: Path) -> Path:
+def _plot_curve(outcome, block: str, weights, directory: Path) -> Path:
     span = curve_input_range(outcome, block)
     if span is None or not span[1] > span[0]:
         # unknown or constant input: show where the neurons bend (|a x + b| <= 3)
-        a = np.abs(np.asarray(weights["a"], dtype=float))
+        a = np.abs(np.asarray(weights.a, dtype=float))
         half = 3.0 / max(float(np.min(a[a > 0])) if np.any(a > 0) else 1.0, 1e-12)
         centre = 0.0 if span is None else span[0]
         lo, hi = centre - half, centre + half
@@ -218,8 +217,8 @@ def _plot_curve(outcome, block: str, weights: dict, directory: Path) -> Path:
     ax.set_xlabel(source)
     ax.set_ylabel(f"{block}{unit}")
     ax.grid(alpha=0.3)
-    state = "fixed" if weights.get("fixed") else "identified"
-    ax.set_title(f"{block} = f({source}), {len(weights['a'])} tanh neurons ({state})", fontsize="medium")
+    state = "fixed" if weights.fixed else "identified"
+    ax.set_title(f"{block} = f({source}), {len(weights.a)} tanh neurons ({state})", fontsize="medium")
     safe = re.sub(r"[^A-Za-z0-9_.-]", "_", block)
     return _save(fig, directory / f"curve_{safe}.png")
 
@@ -262,6 +261,6 @@ def write_plots(outcome, directory: str | Path) -> list[Path]:
     params_png = _plot_parameters(outcome, directory)
     if params_png is not None:
         written.append(params_png)
-    for block, weights in outcome.result["nonlinear"].items():
+    for block, weights in outcome.curves.items():
         written.append(_plot_curve(outcome, block, weights, directory))
     return written

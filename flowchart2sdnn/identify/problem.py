@@ -17,7 +17,7 @@ from ..network.model import Network
 from ..network.runtime import CompiledNetwork
 from ..network.stability import rest_radii
 
-__all__ = ["Problem", "Segment", "build_problem", "metrics", "data_init", "required_columns", "CHATTER_LIMIT"]
+__all__ = ["Problem", "Segment", "build_problem", "metrics", "combined_metrics", "data_init", "required_columns", "CHATTER_LIMIT"]
 
 #: A trial step whose network chatters at rest (see network.stability) by more than this is rejected.
 CHATTER_LIMIT = 1.0 + 1e-9
@@ -226,3 +226,28 @@ def _finite(value) -> float | None:
     """A metric as a float, or None when it is NaN or infinite (a diverged free run): never NaN in JSON."""
     value = float(value)
     return value if np.isfinite(value) else None
+
+
+def combined_metrics(per_record: list[dict], problem: Problem, x: np.ndarray, records: list[Dataset],
+              alignment: str) -> dict:
+    """Training metrics over several records: E summed, RMS and fit % over all their scored samples."""
+    names = problem.compiled.output_names
+    errors, targets = [], []
+    for d in records:
+        u = np.column_stack([np.asarray(d.columns[i.name], dtype=float) for i in problem.network.inputs])
+        y = np.column_stack([np.asarray(d.columns[n], dtype=float) for n in names])
+        rows = fitted_rows(d.n_rows, alignment)
+        yhat = run_aligned(problem.compiled, x, u, alignment, data_init(problem.network, d))
+        errors.append(y[rows] - yhat[rows])
+        targets.append(y[rows])
+    e, y = np.vstack(errors), np.vstack(targets)
+    costs = [m["cost"] for m in per_record]
+    out = {"rows": int(len(e)), "cost": None if None in costs else float(sum(costs)), "rms": {}, "fit_percent": {},
+           "records": per_record}
+    for i, name in enumerate(names):
+        finite = bool(np.all(np.isfinite(e[:, i])))
+        spread = np.linalg.norm(y[:, i] - y[:, i].mean())
+        out["rms"][name] = float(np.sqrt(np.mean(e[:, i] ** 2))) if finite else None
+        out["fit_percent"][name] = (float(100 * (1 - np.linalg.norm(e[:, i]) / spread))
+                                    if finite and spread > 0 else None)
+    return out

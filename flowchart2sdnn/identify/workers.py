@@ -18,6 +18,7 @@ import hashlib
 import pickle
 import threading
 from collections import OrderedDict
+from collections.abc import Callable
 from dataclasses import dataclass
 from typing import Any
 
@@ -25,7 +26,7 @@ import numpy as np
 
 from ..fit.lm import LMResult, levenberg_marquardt
 
-__all__ = ["FitTask", "fit_task", "fit_start", "online_start"]
+__all__ = ["FitTask", "fit_task", "run_start", "fit_start", "run_online_start", "online_start"]
 
 # Problems kept per worker process: a multi-start needs one, a batch worker moves from file to file.
 _CACHE_SIZE = 4
@@ -102,8 +103,26 @@ def _problem(task: FitTask):
     return problem
 
 
+def run_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, options,
+              callback: Callable | None = None) -> LMResult:
+    """Levenberg-Marquardt from ``start`` on ``problem``: the one way a start is fitted, serial or in a worker.
+
+    Parameters
+    ----------
+    problem : Problem
+    start : ndarray (P,)
+    lower, upper : ndarray (P,)
+    options : LMOptions
+    callback : callable ``callback(iteration, x, cost, mu) -> bool``, optional
+        Progress and stop (True stops) after each iteration; only where the caller's process runs the fit.
+    """
+    own = problem.from_start(start)
+    return levenberg_marquardt(own.fun, np.asarray(start, dtype=float), problem.names, lower, upper, options,
+                               callback=callback, guard=own.guard, residual=own.residual)
+
+
 def fit_start(task: FitTask, start: np.ndarray) -> LMResult:
-    """Levenberg-Marquardt from ``start`` on the task's problem (module-level: runs in any worker).
+    """:func:`run_start` on the task's problem (module-level: runs in any worker).
 
     Parameters
     ----------
@@ -114,13 +133,13 @@ def fit_start(task: FitTask, start: np.ndarray) -> LMResult:
     -------
     LMResult
     """
-    problem = _problem(task).from_start(start)
-    return levenberg_marquardt(problem.fun, np.asarray(start, dtype=float), task.names, task.lower, task.upper,
-                               task.options, guard=problem.guard, residual=problem.residual)
+    return run_start(_problem(task), start, task.lower, task.upper, task.options)
 
 
-def online_start(task: FitTask, start: np.ndarray):
-    """Quasi-online identification from ``start`` on the task's problem (``task.options`` an OnlineOptions).
+def run_online_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, options,
+                     callback: Callable | None = None):
+    """Quasi-online identification from ``start`` (``options`` an OnlineOptions): the one way an online start
+    runs, serial or in a worker. ``callback(fraction) -> bool`` reports progress and stops on True.
 
     Returns
     -------
@@ -128,6 +147,11 @@ def online_start(task: FitTask, start: np.ndarray):
     """
     from .online import OnlineStart, quasi_online
 
-    problem = _problem(task)
-    return OnlineStart(quasi_online(problem.compiled, problem.inputs, problem.targets, np.asarray(start, dtype=float),
-                                    task.lower, task.upper, task.options, init=problem.init))
+    return OnlineStart(quasi_online(problem.compiled, problem.inputs, problem.targets,
+                                    np.asarray(start, dtype=float), lower, upper, options, init=problem.init,
+                                    callback=callback))
+
+
+def online_start(task: FitTask, start: np.ndarray):
+    """:func:`run_online_start` on the task's problem (``task.options`` an OnlineOptions; runs in any worker)."""
+    return run_online_start(_problem(task), start, task.lower, task.upper, task.options)

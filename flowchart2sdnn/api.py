@@ -1,0 +1,167 @@
+"""The public Python API: the few calls a script needs, re-exported by ``flowchart2sdnn``.
+
+>>> import flowchart2sdnn as sd
+>>> chart = sd.load_chart("diagrams/engine.yaml")
+>>> data = sd.read_csv("examples/data/engine_idle.csv")
+>>> result = sd.identify(chart, data, max_iter=50)
+>>> result.parameters["J1"].value, result.parameters["J1"].ci95
+
+Every function raises :class:`~flowchart2sdnn.errors.SdnnError` for bad input (its message names the file,
+the place and what was expected) and ValueError naming the setting for a bad setting.
+
+Layer: the top of the library (everything else lies below it; only the command line is above).
+"""
+
+from __future__ import annotations
+
+import csv
+import hashlib
+from collections.abc import Mapping, Sequence
+from pathlib import Path
+
+import numpy as np
+
+from .compiler import Compilation, compile_diagram
+from .data.csvdata import TIME_COLUMNS, Dataset
+from .data.csvdata import read_csv as _read_csv_columns
+from .diagnose.loop import DiagnoseSettings, Diagnosis
+from .diagnose.loop import diagnose as _diagnose
+from .diagram.model import Diagram
+from .diagram.validate import load_diagram
+from .errors import SdnnError
+from .identify.document import read_result
+from .identify.result import Identification
+from .identify.run import identify as _identify
+from .identify.settings import IdentifySettings
+
+__all__ = ["load_chart", "compile_chart", "read_csv", "dataset_from_frame", "identify", "diagnose", "read_result"]
+
+
+def load_chart(path: str | Path) -> Diagram:
+    """Read and validate a chart (YAML, format 1); SdnnError listing every problem with file:line."""
+    return load_diagram(path)
+
+
+def compile_chart(chart: Diagram | str | Path, seed: int = 0) -> Compilation:
+    """Lint, analyse loops, discretize and emit the GDNN; ``.network`` is the compiled network."""
+    return compile_diagram(_chart(chart), seed)
+
+
+def read_csv(path: str | Path, map: Mapping[str, str] | None = None, chart: Diagram | str | Path | None = None,
+             sample_time: float | None = None) -> Dataset:
+    """A record from a CSV file: every column (or only the ones `chart` needs), checked value by value.
+
+    Parameters
+    ----------
+    path : str or Path
+    map : {name: header}, optional
+        Read chart signal `name` from CSV column `header` (``{"time": header}`` names the time column).
+    chart : Diagram or path, optional
+        Keep only the columns this chart needs (and check its sample time against the time column).
+    sample_time : float, optional
+        Expected time step in seconds (default: the chart's, else the median step of the time column).
+    """
+    mapping = dict(map or {})
+    if chart is not None:
+        diagram = _chart(chart)
+        from .identify.problem import required_columns
+
+        return _read_csv_columns(path, required_columns(diagram), mapping, sample_time or diagram.sample_time)
+    header = _header(path)
+    mapped_from = set(mapping.values())
+    time_header = mapping.get("time") or next((h for h in header if h.lower() in TIME_COLUMNS), None)
+    names = [n for n in mapping if n != "time"]
+    names += [h for h in header if h not in mapped_from and h != time_header and h not in names]
+    return _read_csv_columns(path, names, mapping, sample_time)
+
+
+def dataset_from_frame(frame, time: str | None = None, inputs: Sequence[str] | None = None,
+                       outputs: Sequence[str] | None = None, name: str = "<DataFrame>") -> Dataset:
+    """A record from a pandas DataFrame (or any mapping of column name -> 1-D array).
+
+    Parameters
+    ----------
+    frame : pandas.DataFrame or mapping
+    time : str, optional
+        The time column (seconds, strictly increasing).
+    inputs, outputs : sequence of str, optional
+        The columns to keep (default: every column but `time`).
+    name : str
+        How error messages and the result file name this record.
+    """
+    columns = [str(c) for c in (frame.columns if hasattr(frame, "columns") else frame.keys())]
+    wanted = list(inputs or []) + [c for c in (outputs or []) if c not in (inputs or [])]
+    if not wanted:
+        wanted = [c for c in columns if c != time]
+    for c in wanted + ([time] if time else []):
+        if c not in columns:
+            raise SdnnError.at("CSV012", f"column '{c}' is missing (columns: {', '.join(columns)})", name)
+    values = {c: _column(frame, c, name) for c in wanted}
+    n = len(next(iter(values.values()))) if values else 0
+    if n < 3:
+        raise SdnnError.at("CSV009", f"{n} rows, expected at least 3", name)
+    t = step = deviation = None
+    if time:
+        t = _column(frame, time, name)
+        steps = np.diff(t)
+        if np.any(steps <= 0):
+            k = int(np.argmax(steps <= 0)) + 1
+            raise SdnnError.at("CSV019", f"column '{time}' row {k}: time decreases or repeats a value", name)
+        step = float(np.median(steps))
+        deviation = float(np.max(np.abs(steps - step)) / step)
+    digest = hashlib.sha256()
+    for c in wanted + ([time] if time else []):
+        digest.update(c.encode())
+        digest.update((t if c == time else values[c]).tobytes())
+    return Dataset(path=name, columns=values, time=t, n_rows=n, sample_time=step, max_step_deviation=deviation,
+                   sha256=digest.hexdigest(), source_columns={c: c for c in wanted})
+
+
+def identify(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset], validation: Dataset | None = None,
+             **settings) -> Identification:
+    """Identify the chart's physical parameters and learned curves from measured records.
+
+    `settings` are the fields of :class:`~flowchart2sdnn.identify.settings.IdentifySettings` by name
+    (``starts=8, seed=1, max_iter=300, split=0.7, online=True, ...``). The answer's ``.parameters`` maps each
+    name to an :class:`~flowchart2sdnn.identify.result.Estimate` (value, ci95, unit), ``.chart`` is the
+    identified chart, ``.simulate(data)`` runs it, ``.to_json()`` is the RESULT.json text.
+    """
+    return _identify(_chart(chart), data, validation, IdentifySettings(**settings))
+
+
+def diagnose(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset],
+             validation: Sequence[Dataset] = (), **settings) -> Diagnosis:
+    """Trace the residual of a fit of `chart` to effects the chart lacks, add them, refit, report.
+
+    `settings` are the fields of :class:`~flowchart2sdnn.diagnose.loop.DiagnoseSettings` by name
+    (``rounds=2, seed=0, ...``). The answer's ``.diagram`` is the augmented chart, ``.report`` the REPORT.json body.
+    """
+    return _diagnose(_chart(chart), data, tuple(validation), DiagnoseSettings(**settings))
+
+
+def _chart(chart: Diagram | str | Path) -> Diagram:
+    return chart if isinstance(chart, Diagram) else load_diagram(chart)
+
+
+def _column(frame, column: str, name: str) -> np.ndarray:
+    raw = frame[column]
+    raw = raw.to_numpy() if hasattr(raw, "to_numpy") else raw
+    try:
+        values = np.array(raw, dtype=float)
+    except (TypeError, ValueError):
+        raise SdnnError.at("CSV004", f"column '{column}' is not numeric", name) from None
+    if values.ndim != 1:
+        raise SdnnError.at("CSV004", f"column '{column}' is not one-dimensional", name)
+    bad = ~np.isfinite(values)
+    if np.any(bad):
+        raise SdnnError.at("CSV005", f"column '{column}' row {int(np.argmax(bad))}: NaN or infinite value", name)
+    values.setflags(write=False)
+    return values
+
+
+def _header(path: str | Path) -> list[str]:
+    try:
+        with open(path, newline="", encoding="utf-8-sig") as f:
+            return [h.strip() for h in next(csv.reader(f), [])]
+    except (OSError, UnicodeDecodeError):
+        return []  # read_csv itself says what is wrong with the file

@@ -1,0 +1,267 @@
+"""RESULT.json: the only writer and reader of the result file format, and values from it into a chart.
+
+:func:`to_document` turns an :class:`~flowchart2sdnn.identify.result.Identification` into the document (keys as
+they have always been: users' scripts read them), :func:`from_document` reads one back, :func:`dumps` writes it
+as strict JSON. :func:`load_result` checks a file, :func:`apply_result_file` and :func:`fix_from_result` put its
+values into a chart (``simulate --params``, the paper's stages with ``--fix-from``).
+
+Layer: identify.
+"""
+
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+from ..diagram.dump import with_values
+from ..diagram.model import Diagram
+from ..errors import SdnnError
+from ..strictjson import strict_json
+from .result import (
+    ChartSource,
+    Curve,
+    DataInfo,
+    Estimate,
+    Fit,
+    Identification,
+    Metrics,
+    MultistartSummary,
+    OnlineTrace,
+    OptimizerTrace,
+    RecordInfo,
+    Uncertainty,
+)
+from .settings import IdentifySettings
+
+__all__ = ["to_document", "from_document", "dumps", "read_result", "load_result", "apply_result_file",
+           "fix_from_result", "RESULT_FORMAT", "RESULT_VERSION"]
+
+RESULT_FORMAT = "sdnn-result"
+RESULT_VERSION = 1
+#: The document's own warning when it had to store NaN/inf as null (not part of the typed result).
+_NON_FINITE = "non-finite values stored as null: "
+
+
+# ------------------------------------------------------------------------------------------------ writing
+def _metrics(m: Metrics) -> dict:
+    out = {"rows": m.rows, "cost": m.cost, "rms": dict(m.rms), "fit_percent": dict(m.fit_percent)}
+    if m.records is not None:
+        out["records"] = [_metrics(r) for r in m.records]
+    if m.note is not None:
+        out["note"] = m.note
+    return out
+
+
+def _record(r: RecordInfo | None) -> dict | None:
+    return None if r is None else {"file": r.file, "sha256": r.sha256, "rows": r.rows,
+                                   "max_step_deviation": r.max_step_deviation}
+
+
+def _settings(s: IdentifySettings) -> dict:
+    from dataclasses import asdict
+
+    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(s).items()}
+
+
+def to_document(ident: Identification) -> dict:
+    """The RESULT.json body of an identification (NaN/inf stored as null, with a warning saying where)."""
+    doc = {
+        "format": RESULT_FORMAT,
+        "version": RESULT_VERSION,
+        "status": ident.status,
+        "message": ident.message,
+        "interrupted": bool(ident.interrupted),
+        "parameters": {n: {"value": e.value, "init": e.init, "stderr": e.stderr,
+                           "ci95": None if e.ci95 is None else list(e.ci95), "unit": e.unit, "fixed": e.fixed}
+                       for n, e in ident.parameters.items()},
+        "nonlinear": {b: {"a": list(c.a), "v": list(c.v), **({"b": list(c.b)} if c.b is not None else {}),
+                          "fixed": c.fixed} for b, c in ident.curves.items()},
+        "fit": {"train": _metrics(ident.fit.train),
+                "validation": None if ident.fit.validation is None else _metrics(ident.fit.validation)},
+        "warnings": list(ident.warnings),
+        "settings": _settings(ident.settings),
+        "seed": ident.settings.seed,
+        "chart": {"name": ident.source.name, "file": ident.source.file, "sha256": ident.source.sha256},
+        "data": {"train": _record(ident.data.train), "train_records": [_record(r) for r in ident.data.train_records],
+                 "validation": _record(ident.data.validation)},
+        "versions": dict(ident.versions),
+    }
+    if (o := ident.optimizer) is not None:
+        doc["optimizer"] = {"iterations": o.iterations, "cost_history": list(o.cost_history), "nfev": o.nfev,
+                            "njev": o.njev, "rejected": {"cost": o.rejected_cost, "diverged": o.rejected_diverged,
+                                                         "chatter": o.rejected_chatter}}
+    if (m := ident.multistart) is not None:
+        ms = {"n": m.n, "best_index": m.best_index, "costs": list(m.costs), "near_best": list(m.near_best),
+              "local_minima": list(m.local_minima), "diverged": list(m.diverged),
+              "starts": [list(s) for s in m.starts], "message": m.message}
+        if m.names is not None:
+            ms["names"] = list(m.names)
+        if m.cost is not None:
+            ms["cost"] = m.cost
+        doc["multistart"] = ms
+    if (u := ident.uncertainty) is not None:
+        doc["uncertainty"] = {"names": list(u.names), "correlation": [list(r) for r in u.correlation],
+                              "condition_number": u.condition_number,
+                              "unidentifiable": [list(g) for g in u.unidentifiable], "sigma2": u.sigma2,
+                              "residual_lag1": u.residual_lag1, "interval_inflation": u.interval_inflation,
+                              "note": u.note}
+    if (t := ident.online) is not None:
+        doc["online"] = {"window": t.window, "average": t.average, "every": t.every, "steps": t.steps,
+                         "mean_cost": t.mean_cost, "final": dict(t.final), "trajectory_time": list(t.trajectory_time),
+                         "trajectories": {n: list(v) for n, v in t.trajectories.items()},
+                         "cost_time": list(t.cost_time), "cost": list(t.cost)}
+    bad: list[str] = []
+    doc = strict_json(doc, "", bad)
+    if bad:
+        doc["warnings"].append(f"{_NON_FINITE}{', '.join(bad[:5])}" + (f" (+{len(bad) - 5} more)" if len(bad) > 5 else ""))
+    doc.update(ident.extra)
+    return doc
+
+
+def dumps(doc: dict) -> str:
+    """A document as RESULT.json text (strict JSON; what `sdnn identify -o` writes)."""
+    return json.dumps(doc, indent=1, allow_nan=False) + "\n"
+
+
+# ------------------------------------------------------------------------------------------------ reading
+_KNOWN = {"format", "version", "status", "message", "interrupted", "parameters", "nonlinear", "fit", "warnings",
+          "settings", "seed", "chart", "data", "versions", "optimizer", "multistart", "uncertainty", "online"}
+
+
+def _nan(x):
+    return math.nan if x is None else x
+
+
+def _tuple(x):
+    return None if x is None else tuple(x)
+
+
+def _read_metrics(d: dict) -> Metrics:
+    records = d.get("records")
+    return Metrics(rows=d["rows"], cost=d["cost"], rms=dict(d["rms"]), fit_percent=dict(d["fit_percent"]),
+                   records=None if records is None else tuple(_read_metrics(r) for r in records), note=d.get("note"))
+
+
+def _read_record(d: dict | None) -> RecordInfo | None:
+    return None if d is None else RecordInfo(d["file"], d["sha256"], d["rows"], d["max_step_deviation"])
+
+
+def from_document(doc: dict, chart: Diagram | None = None) -> Identification:
+    """An :class:`Identification` from a RESULT.json body (``to_document`` of it gives the body back).
+
+    ``chart`` is the identified chart when it was read too (the ``.chart.yaml`` beside the result).
+    """
+    s = dict(doc["settings"])
+    s["fixed_from"] = tuple(s.get("fixed_from", ()))
+    settings = IdentifySettings(**s)
+    fit = doc["fit"]
+    ms = doc.get("multistart")
+    unc = doc.get("uncertainty")
+    onl = doc.get("online")
+    opt = doc.get("optimizer")
+    data = doc["data"]
+    return Identification(
+        status=doc["status"], message=doc["message"], interrupted=doc["interrupted"],
+        parameters={n: Estimate(_nan(p["value"]), _nan(p["init"]), p["stderr"], _tuple(p["ci95"]), p["unit"],
+                                p["fixed"]) for n, p in doc["parameters"].items()},
+        curves={b: Curve(tuple(map(_nan, c["a"])), tuple(map(_nan, c["v"])),
+                         None if c.get("b") is None else tuple(map(_nan, c["b"])), c["fixed"])
+                for b, c in doc["nonlinear"].items()},
+        fit=Fit(_read_metrics(fit["train"]), None if fit["validation"] is None else _read_metrics(fit["validation"])),
+        warnings=tuple(w for w in doc["warnings"] if not w.startswith(_NON_FINITE)),
+        settings=settings, chart=chart,
+        source=ChartSource(doc["chart"]["name"], doc["chart"]["file"], doc["chart"]["sha256"]),
+        data=DataInfo(_read_record(data["train"]), tuple(_read_record(r) for r in data["train_records"]),
+                      _read_record(data["validation"])),
+        versions=dict(doc["versions"]),
+        optimizer=None if opt is None else OptimizerTrace(
+            opt["iterations"], tuple(map(_nan, opt["cost_history"])), opt["nfev"], opt["njev"],
+            opt["rejected"]["cost"], opt["rejected"]["diverged"], opt["rejected"]["chatter"]),
+        multistart=None if ms is None else MultistartSummary(
+            ms["n"], ms["best_index"], tuple(ms["costs"]), tuple(ms["near_best"]), tuple(ms["local_minima"]),
+            tuple(ms["diverged"]), tuple(tuple(map(_nan, r)) for r in ms["starts"]), ms["message"],
+            _tuple(ms.get("names")), ms.get("cost")),
+        uncertainty=None if unc is None else Uncertainty(
+            tuple(unc["names"]), tuple(tuple(r) for r in unc["correlation"]), unc["condition_number"],
+            tuple(tuple(g) for g in unc["unidentifiable"]), _nan(unc["sigma2"]), unc["residual_lag1"],
+            _nan(unc["interval_inflation"]), unc["note"]),
+        online=None if onl is None else OnlineTrace(
+            onl["window"], onl["average"], onl["every"], onl["steps"], _nan(onl["mean_cost"]),
+            {n: _nan(v) for n, v in onl["final"].items()}, tuple(map(_nan, onl["trajectory_time"])),
+            {n: tuple(map(_nan, v)) for n, v in onl["trajectories"].items()}, tuple(map(_nan, onl["cost_time"])),
+            tuple(map(_nan, onl["cost"]))),
+        extra={k: v for k, v in doc.items() if k not in _KNOWN},
+    )
+
+
+def read_result(path: str | Path, chart: Diagram | None = None) -> Identification:
+    """Read a RESULT.json written by `sdnn identify` as an :class:`Identification`."""
+    return from_document(load_result(path), chart)
+
+
+def load_result(path: str | Path) -> dict:
+    """Read a RESULT.json written by `sdnn identify`; SdnnError naming the file when it is not one."""
+    name = str(path)
+    try:
+        data = json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise SdnnError.at("RES001", "no such file", name) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SdnnError.at("RES001", f"cannot read: {exc}", name) from None
+    except json.JSONDecodeError as exc:
+        raise SdnnError.at("RES002", f"not JSON: {exc.msg}", name, exc.lineno, exc.colno) from None
+    if not isinstance(data, dict) or data.get("format") != RESULT_FORMAT:
+        raise SdnnError.at("RES003", f"not an sdnn result file (expected \"format\": \"{RESULT_FORMAT}\")", name)
+    params = data.get("parameters")
+    nonlinear = data.get("nonlinear", {})
+    if not isinstance(params, dict) or not isinstance(nonlinear, dict):
+        raise SdnnError.at("RES003", "result file lacks 'parameters' or 'nonlinear' mappings", name)
+    for pname, spec in params.items():
+        value = spec.get("value") if isinstance(spec, dict) else None
+        if not isinstance(value, (int, float)) or isinstance(value, bool) or not math.isfinite(value):
+            raise SdnnError.at("RES003", f"parameter '{pname}' has no finite 'value'", name)
+    for bname, w in nonlinear.items():
+        if not isinstance(w, dict) or not all(isinstance(w.get(k), list) for k in ("a", "v")):
+            raise SdnnError.at("RES003", f"nonlinear block '{bname}' needs weight lists 'a' and 'v'", name)
+    return data
+
+
+def _values(data: dict) -> tuple[dict[str, float], dict[str, dict]]:
+    return ({k: float(v["value"]) for k, v in data["parameters"].items()}, dict(data.get("nonlinear", {})))
+
+
+def apply_result_file(diagram: Diagram, path: str | Path) -> Diagram:
+    """The chart with the identified values of a result file (matching names; others unchanged)."""
+    params, nonlinear = _values(load_result(path))
+    nonlinear = _matching_curves(diagram, nonlinear, str(path))
+    return with_values(diagram, params, nonlinear)
+
+
+def fix_from_result(diagram: Diagram, path: str | Path) -> tuple[Diagram, list[str]]:
+    """Take matching parameters and nonlinear blocks from an earlier result and fix them (the paper's stages)."""
+    params, nonlinear = _values(load_result(path))
+    names = set(diagram.parameter_names)
+    params = {k: v for k, v in params.items() if k in names}
+    nonlinear = _matching_curves(diagram, nonlinear, str(path))
+    if not params and not nonlinear:
+        raise SdnnError.at("RES004", "no parameter or nonlinear block name matches the chart", str(path),
+                           hint=f"the chart has parameters {', '.join(sorted(names)) or 'none'}")
+    return with_values(diagram, params, nonlinear, fix=True), sorted(params) + sorted(nonlinear)
+
+
+def _matching_curves(diagram: Diagram, nonlinear: dict, path: str) -> dict:
+    out = {}
+    for b in diagram.blocks:
+        if b.kind != "nonlinear" or b.name not in nonlinear:
+            continue
+        w = nonlinear[b.name]
+        if len(w["a"]) != b.neurons or len(w["v"]) != b.neurons:
+            raise SdnnError.at("RES005", f"nonlinear block '{b.name}' has {b.neurons} neurons in the chart but "
+                               f"{len(w['a'])} in the result", path, block=b.name)
+        if b.bias and w.get("b") is None:
+            w = {**w, "b": [0.0] * b.neurons}
+        if not b.bias:
+            w = {k: v for k, v in w.items() if k != "b"}
+        out[b.name] = w
+    return out

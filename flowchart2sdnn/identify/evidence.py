@@ -1,0 +1,147 @@
+"""How far the fit can be trusted: the start's stability, the covariance with intervals widened for coloured
+residuals, parameters that cannot be told apart, a network close to chattering, data that excite nothing.
+
+Layer: identify.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import replace
+
+import numpy as np
+
+from ..errors import SdnnError
+from ..fit.uncertainty import covariance
+from .problem import CHATTER_LIMIT, GROWTH_LIMIT, Problem
+from .result import Uncertainty
+
+__all__ = ["start_stability", "on_bound_warnings", "no_excitation_message", "Evidence", "assess", "CHATTER_WARN"]
+
+#: Warn when the fitted network is this close to chattering at rest.
+CHATTER_WARN = 0.9
+_INFLATION_NOTE = ("stderr and ci95 are widened by interval_inflation = sqrt((1+rho)/(1-rho)) for the residual's "
+                   "lag-1 autocorrelation rho (coloured residuals carry fewer independent samples)")
+
+
+class Evidence:
+    """The covariance analysis at the final point: standard errors and 95 % half-widths (already widened), or
+    None where unavailable; the :class:`Uncertainty` of the result; warnings; whether the data excite nothing."""
+
+    def __init__(self, stderr=None, half=None, uncertainty: Uncertainty | None = None,
+                 warnings: list[str] | None = None, no_excitation: bool = False):
+        self.stderr, self.half, self.uncertainty = stderr, half, uncertainty
+        self.warnings = warnings or []
+        self.no_excitation = no_excitation
+
+
+def assess(problem: Problem, x: np.ndarray, diverged: bool) -> Evidence:
+    """Uncertainty at ``x`` (the Jacobian of the whole training record) and the warnings it gives."""
+    if not problem.names or diverged:
+        return Evidence()
+    fe = problem.fun(x)
+    out = Evidence()
+    cov = None
+    if fe is not None and not np.any(fe[1]):
+        out.no_excitation = True
+    elif fe is not None:
+        cov = covariance(fe[1], fe[0], names=problem.names)
+        if cov.available and not math.isfinite(cov.sigma2):
+            cov = None  # the residual's square overflows: no meaningful uncertainty
+        else:
+            out.warnings.extend(_identifiability_warnings(cov, problem))
+            rho, inflation = _coloured_residual(fe[0], len(problem.compiled.output_names))
+    radius = problem.chatter(x)
+    if radius > CHATTER_WARN:
+        out.warnings.append(f"the fitted network is close to chattering at rest (eigenvalue {-radius:.3f}); a "
+                            "learned curve is nearly as steep as the sample time allows (about 2*J/T)")
+    if cov is None or not cov.available:
+        return out
+    out.stderr = np.where(np.isfinite(cov.stderr), cov.stderr * inflation, np.nan)
+    out.half = np.asarray(cov.ci95, dtype=float) * inflation
+    corr = np.where(np.isfinite(cov.correlation), cov.correlation, np.nan)
+    out.uncertainty = Uncertainty(
+        names=tuple(problem.names),
+        correlation=tuple(tuple(None if not np.isfinite(v) else round(float(v), 12) for v in row) for row in corr),
+        condition_number=float(cov.condition_number) if np.isfinite(cov.condition_number) else None,
+        unidentifiable=tuple(tuple(g) for g in cov.unidentifiable), sigma2=cov.sigma2, residual_lag1=rho,
+        interval_inflation=inflation, note=_INFLATION_NOTE)
+    return out
+
+
+def no_excitation_message(problem: Problem) -> str:
+    constant = [spec.name for spec, col in zip(problem.compiled.net.inputs, problem.inputs.T, strict=True)
+                if np.ptp(col) == 0] if problem.inputs.size else []
+    why = f" (constant input: {', '.join(constant)})" if constant else ""
+    return ("the training data do not excite the model: no output depends on any free parameter or curve"
+            f"{why}; the start values are returned, nothing was identified")
+
+
+def start_stability(problem: Problem, x0: np.ndarray) -> tuple[Problem, list[str]]:
+    """Check the start at rest. Chatter (a sign flip every sample) cannot be fitted away: an error. A start that
+    drifts away from rest can: warn, and let the guard accept steps no worse than the start."""
+    if not problem.names:
+        return problem, []
+    chatter, growth = problem.stability(x0)
+    if chatter > CHATTER_LIMIT:
+        raise SdnnError.at(
+            "FIT001", f"at its initial values (init) the chart's discrete network chatters at rest (eigenvalue "
+            f"{-chatter:.3f}): a curve in a feedback loop is too steep for the sample time "
+            f"T = {problem.network.sample_time:g} s (limit about 2*J/T)", problem.diagram.file,
+            hint="soften the curve (a larger eps of sign_smooth, a smaller k or init) or use a learned `nonlinear` block")
+    if growth <= GROWTH_LIMIT:
+        return problem, []
+    warning = (f"at its initial values the chart's discrete network drifts away from rest (eigenvalue {growth:.3f}): "
+               "a curve in a feedback loop has a negative slope at zero; the fit may take long to recover")
+    return replace(problem, stability_floor=(chatter, growth)), [warning]
+
+
+def on_bound_warnings(names, x0: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> list[str]:
+    """Starts exactly on a bound: allowed, but the bound transform is flat there and such a quantity moves slowly."""
+    out = []
+    for name, x, lo, hi in zip(names, x0, lower, upper, strict=True):
+        side = "lower" if x == lo else "upper" if x == hi else None
+        if side:
+            out.append(f"{name} starts on its {side} bound ({x:g}); it can move away only slowly (the bound "
+                       "transform is flat there): start it inside the bounds")
+    return out
+
+
+def _coloured_residual(residual: np.ndarray, n_outputs: int) -> tuple[float | None, float]:
+    """Lag-1 autocorrelation of the residual and the factor that widens the intervals for it.
+
+    The textbook covariance assumes white residuals; model error makes them coloured and the intervals far
+    too narrow. With an AR(1) residual of correlation rho the effective number of samples is
+    n (1 - rho) / (1 + rho), so standard errors grow by sqrt((1 + rho) / (1 - rho)).
+    """
+    e = residual.reshape(-1, n_outputs)
+    if len(e) < 3:
+        return None, 1.0
+    rhos = []
+    for i in range(n_outputs):
+        ei = e[:, i] - e[:, i].mean()
+        denom = float(ei @ ei)
+        if denom > 0:
+            rhos.append(float(ei[1:] @ ei[:-1]) / denom)
+    if not rhos:
+        return None, 1.0
+    rho = float(np.mean(rhos))
+    r = min(max(rho, 0.0), 0.999)
+    return rho, float(np.sqrt((1 + r) / (1 - r)))
+
+
+def _identifiability_warnings(cov, problem: Problem) -> list[str]:
+    """Groups that cannot be told apart, when they involve a physical parameter.
+
+    The weights of one learned curve trade off against each other all the time (a*v of a nearly linear
+    neuron); that says nothing about the physics, so such groups are not reported.
+    """
+    physical = {p.name for p in problem.network.parameters}
+    out = []
+    for group in cov.unidentifiable:
+        if physical & set(group):
+            out.append(f"cannot be told apart from this data: {', '.join(group)} (fix all but one, or excite more)")
+    for a, b, r in cov.correlated:
+        if {a, b} & physical and not any({a, b} <= set(g) for g in cov.unidentifiable):
+            out.append(f"{a} and {b} are almost interchangeable here (correlation {r:+.4f})")
+    return out

@@ -1,0 +1,274 @@
+"""What an identification found, as frozen typed data.
+
+:class:`Identification` is what :func:`flowchart2sdnn.identify` returns and what diagnose, batch, the plots and
+the text summary read: physical parameters as :class:`Estimate` (value, 95 % interval, unit), learned curves as
+:class:`Curve`, fit metrics per record and output (:class:`Metrics`), the optimizer's trace, the multi-start
+summary, the uncertainty analysis, the quasi-online trace and the identified chart. Only
+:mod:`flowchart2sdnn.identify.document` turns it into RESULT.json and back.
+
+Layer: identify (below it: data, network, compiler, diagram).
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping
+from dataclasses import dataclass, field
+from functools import cached_property
+from typing import Any
+
+import numpy as np
+
+from ..diagram.model import Diagram
+from .settings import IdentifySettings
+
+__all__ = ["Estimate", "Curve", "Metrics", "Fit", "Uncertainty", "OptimizerTrace", "MultistartSummary",
+           "OnlineTrace", "RecordInfo", "DataInfo", "ChartSource", "Identification"]
+
+
+@dataclass(frozen=True)
+class Estimate:
+    """One physical parameter: its identified value, start value, standard error and 95 % interval, unit.
+
+    ``stderr`` and ``ci95`` are None when the parameter is fixed or no uncertainty could be computed; they are
+    widened for coloured residuals (see :attr:`Uncertainty.interval_inflation`).
+    """
+
+    value: float
+    init: float
+    stderr: float | None
+    ci95: tuple[float, float] | None
+    unit: str | None
+    fixed: bool
+
+
+@dataclass(frozen=True)
+class Curve:
+    """A learned static curve (a `nonlinear` block): y = sum v_i tanh(a_i x + b_i)."""
+
+    a: tuple[float, ...]
+    v: tuple[float, ...]
+    b: tuple[float, ...] | None
+    fixed: bool
+
+    @property
+    def slope_at_zero(self) -> float:
+        return float(sum(a * v for a, v in zip(self.a, self.v, strict=True)))
+
+    def __call__(self, x: np.ndarray | float) -> np.ndarray:
+        x = np.asarray(x, dtype=float)[..., None]
+        b = np.asarray(self.b if self.b is not None else np.zeros(len(self.a)))
+        return np.tanh(x * np.asarray(self.a) + b) @ np.asarray(self.v)
+
+
+@dataclass(frozen=True)
+class Metrics:
+    """Free-run fit on a record (or several): cost E (eq. 4), RMS and fit % per output, rows scored.
+
+    A metric is None where the free run diverged. ``records`` holds the per-record metrics when several
+    training records were fitted together; ``note`` says how a validation was scored (e.g. after a split).
+    """
+
+    rows: int
+    cost: float | None
+    rms: Mapping[str, float | None]
+    fit_percent: Mapping[str, float | None]
+    records: tuple[Metrics, ...] | None = None
+    note: str | None = None
+
+
+@dataclass(frozen=True)
+class Fit:
+    train: Metrics
+    validation: Metrics | None = None
+
+
+@dataclass(frozen=True)
+class Uncertainty:
+    """The covariance analysis at the final point (correlations rounded to 12 digits, None where undefined)."""
+
+    names: tuple[str, ...]
+    correlation: tuple[tuple[float | None, ...], ...]
+    condition_number: float | None
+    unidentifiable: tuple[tuple[str, ...], ...]
+    sigma2: float
+    residual_lag1: float | None
+    interval_inflation: float
+    note: str
+
+
+@dataclass(frozen=True)
+class OptimizerTrace:
+    """Levenberg-Marquardt's work: iterations, cost after each, evaluations, refused trial steps by cause."""
+
+    iterations: int
+    cost_history: tuple[float, ...]
+    nfev: int
+    njev: int
+    rejected_cost: int
+    rejected_diverged: int
+    rejected_chatter: int
+
+
+@dataclass(frozen=True)
+class MultistartSummary:
+    """How the starts of a multi-start fit ended (indices into ``starts``; costs None where a start diverged).
+
+    ``names`` is the parameter order of ``starts`` (given with several starts); ``cost`` says which cost was
+    compared when it is not the training cost E (quasi-online runs).
+    """
+
+    n: int
+    best_index: int
+    costs: tuple[float | None, ...]
+    near_best: tuple[int, ...]
+    local_minima: tuple[int, ...]
+    diverged: tuple[int, ...]
+    starts: tuple[tuple[float, ...], ...]
+    message: str
+    names: tuple[str, ...] | None = None
+    cost: str | None = None
+
+
+@dataclass(frozen=True)
+class OnlineTrace:
+    """The quasi-online run: window settings, parameter and window-cost trajectories over time."""
+
+    window: int
+    average: int
+    every: int
+    steps: int
+    mean_cost: float
+    final: Mapping[str, float]
+    trajectory_time: tuple[float, ...]
+    trajectories: Mapping[str, tuple[float, ...]]
+    cost_time: tuple[float, ...]
+    cost: tuple[float, ...]
+
+
+@dataclass(frozen=True)
+class RecordInfo:
+    """Which data file was used: path, content hash, rows, largest deviation of its time steps."""
+
+    file: str | None
+    sha256: str | None
+    rows: int
+    max_step_deviation: float | None
+
+
+@dataclass(frozen=True)
+class DataInfo:
+    train: RecordInfo
+    train_records: tuple[RecordInfo, ...]
+    validation: RecordInfo | None
+
+
+@dataclass(frozen=True)
+class ChartSource:
+    name: str
+    file: str | None
+    sha256: str | None
+
+
+@dataclass(frozen=True, eq=False)
+class Identification:
+    """What :func:`~flowchart2sdnn.identify.run.identify` found.
+
+    Attributes
+    ----------
+    status, message : str        the optimizer's status word ("ok", "max_iter", "interrupted", ...) and sentence
+    interrupted : bool           stopped early (Ctrl-C); the best point so far is reported
+    parameters : {name: Estimate}   every chart parameter, fixed ones included, in chart order
+    curves : {block: Curve}      the learned curves
+    fit : Fit                    training and validation metrics
+    warnings : tuple of str
+    settings : IdentifySettings
+    chart : Diagram or None      the identified chart (values as init, learned curves stored); None when read
+                                 from a RESULT.json alone
+    source : ChartSource         the chart that was fitted
+    data : DataInfo
+    versions : {package: version}
+    optimizer, multistart, uncertainty, online : optional parts (None where they do not apply)
+    extra : {key: value}         further RESULT.json keys written beside the result (the command line, the
+                                 identified chart's file), kept so a document reads back unchanged
+
+    The fitting problem and the optimizer's raw results (``problem``, ``x``, ``lm``, ``online_run``) are there
+    for the code that continues from a fit (diagnose, plots); they are not part of the document.
+    """
+
+    status: str
+    message: str
+    interrupted: bool
+    parameters: Mapping[str, Estimate]
+    curves: Mapping[str, Curve]
+    fit: Fit
+    warnings: tuple[str, ...]
+    settings: IdentifySettings
+    chart: Diagram | None
+    source: ChartSource
+    data: DataInfo
+    versions: Mapping[str, str]
+    optimizer: OptimizerTrace | None = None
+    multistart: MultistartSummary | None = None
+    uncertainty: Uncertainty | None = None
+    online: OnlineTrace | None = None
+    extra: Mapping[str, Any] = field(default_factory=dict)
+    problem: Any = field(default=None, repr=False)
+    x: np.ndarray | None = field(default=None, repr=False)
+    lm: Any = field(default=None, repr=False)
+    online_run: Any = field(default=None, repr=False)
+
+    @property
+    def diagram(self) -> Diagram | None:
+        """The identified chart (the same as :attr:`chart`)."""
+        return self.chart
+
+    @property
+    def values(self) -> dict[str, float]:
+        """Parameter name -> identified value."""
+        return {name: e.value for name, e in self.parameters.items()}
+
+    def simulate(self, data, alignment: str | None = None) -> dict[str, np.ndarray]:
+        """Free-run the identified network on a record's inputs; output name -> simulated samples.
+
+        Parameters
+        ----------
+        data : Dataset
+            A record with the chart's input columns (and the data columns of `init: data` states).
+        alignment : str, optional
+            "zoh" or "direct"; default the one of the fit.
+        """
+        from ..network.alignment import run_aligned
+        from ..network.runtime import CompiledNetwork
+        from .problem import data_init, network_input_names
+
+        if self.problem is not None and self.x is not None:
+            compiled, x = self.problem.compiled, self.x
+        else:
+            if self.chart is None:
+                raise ValueError("this result has no chart to simulate (read the RESULT.json with its chart)")
+            from ..compiler import compile_diagram
+
+            compiled = CompiledNetwork(compile_diagram(self.chart))
+            x = compiled.theta0()
+        net = compiled.net
+        u = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in network_input_names(net)])
+        y = run_aligned(compiled, x, u, alignment or self.settings.alignment, data_init(net, data))
+        return {name: y[:, i] for i, name in enumerate(compiled.output_names)}
+
+    def to_document(self) -> dict:
+        """The RESULT.json body, a new dict each call (see :mod:`flowchart2sdnn.identify.document`)."""
+        from .document import to_document
+
+        return to_document(self)
+
+    @cached_property
+    def result(self) -> dict:
+        """The RESULT.json body, built on first access and kept (for scripts that read the document's keys;
+        the library itself reads the typed fields)."""
+        return self.to_document()
+
+    def to_json(self) -> str:
+        """RESULT.json as text (strict JSON: non-finite numbers are stored as null, with a warning)."""
+        from .document import dumps
+
+        return dumps(self.to_document())
