@@ -14,7 +14,7 @@ import pytest
 from diagnose_bench import chart, record
 
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS, Friction, Physical, Scales
-from flowchart2sdnn.diagnose.loop import DiagnoseSettings, _candidates, _done_key, diagnose
+from flowchart2sdnn.diagnose.loop import DiagnoseSettings, candidates, diagnose, done_key
 from flowchart2sdnn.diagram.validate import load_diagram
 
 SCALES = Scales(rms={"w1": 5.0, "w2": 5.0, "dw": 0.5, "dphi": 0.01, "M1": 3.0}, lo={"M1": -7.0}, hi={"M1": 7.0})
@@ -28,22 +28,22 @@ def _friction_options(cands, at: str) -> set[str]:
 def _accept(nominal, at: str, physical: bool) -> tuple:
     place = next(p for p in Friction().places(nominal) if p.at == at)
     option = next(o for o in Friction().options(nominal, place, SCALES) if isinstance(o, Physical) == physical)
-    cand = next(c for c in _candidates([Friction()], nominal, SCALES, set()) if c.at == at and c.option == option)
-    return _done_key(cand)
+    cand = next(c for c in candidates([Friction()], nominal, SCALES, set()) if c.at == at and c.option == option)
+    return done_key(cand)
 
 
 def test_after_the_physical_terms_a_learned_curve_is_still_offered_at_that_speed():
     nominal = chart("two_mass_nominal")
-    before = _candidates(list(BUILTIN_EFFECTS.values()), nominal, SCALES, set())
+    before = candidates(list(BUILTIN_EFFECTS.values()), nominal, SCALES, set())
     assert _friction_options(before, "w2") == {"coulomb", "curve"}
-    after = _candidates(list(BUILTIN_EFFECTS.values()), nominal, SCALES, {_accept(nominal, "w2", physical=True)})
+    after = candidates(list(BUILTIN_EFFECTS.values()), nominal, SCALES, {_accept(nominal, "w2", physical=True)})
     assert _friction_options(after, "w2") == {"curve"}
     assert _friction_options(after, "w1") == {"coulomb", "curve"}  # the other speed is untouched
 
 
 def test_a_learned_curve_takes_friction_off_the_list_at_that_speed():
     nominal = chart("two_mass_nominal")
-    after = _candidates(list(BUILTIN_EFFECTS.values()), nominal, SCALES, {_accept(nominal, "w1", physical=False)})
+    after = candidates(list(BUILTIN_EFFECTS.values()), nominal, SCALES, {_accept(nominal, "w1", physical=False)})
     assert _friction_options(after, "w1") == set()
     assert _friction_options(after, "w2") == {"coulomb", "curve"}
 
@@ -51,11 +51,11 @@ def test_a_learned_curve_takes_friction_off_the_list_at_that_speed():
 def test_other_effects_are_taken_off_whole_and_cogging_per_harmonic():
     nominal = chart("two_mass_nominal")
     effects = list(BUILTIN_EFFECTS.values())
-    cands = _candidates(effects, nominal, SCALES, set())
+    cands = candidates(effects, nominal, SCALES, set())
     dead_time = next(c for c in cands if c.name == "dead_time")
     cog = [c for c in cands if c.name == "cogging" and c.at == "w1"]
     assert len(cog) > 1
-    after = _candidates(effects, nominal, SCALES, {_done_key(dead_time), _done_key(cog[0])})
+    after = candidates(effects, nominal, SCALES, {done_key(dead_time), done_key(cog[0])})
     assert not [c for c in after if c.name == "dead_time"]
     left = {c.option for c in after if c.name == "cogging" and c.at == "w1"}
     assert cog[0].option not in left and {c.option for c in cog[1:]} <= left

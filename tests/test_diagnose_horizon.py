@@ -18,9 +18,9 @@ from flowchart2sdnn.diagnose.graph import speeds
 from flowchart2sdnn.diagnose.loop import (
     DiagnoseSettings,
     Fitted,
-    _fit,
-    _horizons,
     diagnose,
+    fit_chart,
+    horizons,
     refit_unit,
     refusal,
 )
@@ -42,7 +42,7 @@ class _Rows:
     ([3001], 0, []),                    # switched off
 ])
 def test_stages_grow_fourfold_up_to_the_longest_record(rows, first, stages):
-    assert _horizons([_Rows(n) for n in rows], first) == stages
+    assert horizons([_Rows(n) for n in rows], first) == stages
 
 
 def test_settings_refuse_a_negative_horizon():
@@ -62,7 +62,7 @@ def one_mass():
 
 def test_the_refit_from_the_chart_as_given_keeps_the_lower_cost_of_both_schedules(one_mass):
     train, records, patched = one_mass
-    plain = _fit(patched, train, records, SETTINGS, SETTINGS.refit_iter, 0, "nominal")
+    plain = fit_chart(patched, train, records, SETTINGS, SETTINGS.refit_iter, 0, "nominal")
     unit = (patched, train, records, SETTINGS, SETTINGS.refit_iter, 0, "nominal", ())
     fitted, seconds = refit_unit(unit)
     assert seconds > 0 and fitted.start in ("nominal", "horizon")
@@ -76,7 +76,7 @@ def test_the_refit_from_the_chart_as_given_keeps_the_lower_cost_of_both_schedule
 
 def test_the_median_record_rms_is_each_records_rms_of_a_plain_simulation(one_mass):
     train, records, patched = one_mass
-    fitted = _fit(patched, train, records, SETTINGS, 5, 0, "nominal")
+    fitted = fit_chart(patched, train, records, SETTINGS, 5, 0, "nominal")
     names = list(fitted.diagram.output_names)
     each = []
     for ds, _ in records:

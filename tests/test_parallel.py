@@ -24,7 +24,7 @@ from flowchart2sdnn.executors import (
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.identify.problem import build_problem, required_columns
 from flowchart2sdnn.identify.run import IdentifySettings, identify
-from flowchart2sdnn.identify.workers import _problem, fit_start, fit_task
+from flowchart2sdnn.identify.workers import fit_start, fit_task, problem_of
 
 SETTINGS = IdentifySettings(starts=4, seed=7, max_iter=12)
 
@@ -116,8 +116,8 @@ def test_worker_problem_is_the_callers_problem(case, tmp_path):
     lo, hi = np.zeros(len(names)), np.full(len(names), np.inf)
     options = LMOptions(max_iter=4)
     task = fit_task(problem, lo, hi, options)
-    rebuilt = _problem(task)
-    assert rebuilt is _problem(task)  # built once per worker
+    rebuilt = problem_of(task)
+    assert rebuilt is problem_of(task)  # built once per worker
     assert rebuilt.stability_floor == (0.5, 1.5) and len(rebuilt.segments) == 2
     x0 = problem.compiled.theta0()
     direct = levenberg_marquardt(problem.fun, x0, names, lo, hi, options, guard=problem.guard,

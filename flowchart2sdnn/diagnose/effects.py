@@ -94,6 +94,9 @@ class Scales:
 
 @runtime_checkable
 class Effect(Protocol):
+    """A named candidate the chart may lack. ``repeatable``: once accepted at a place, its other options stay on
+    offer there (cogging harmonics add up); effects that do not say so are not repeatable."""
+
     name: str
     neutral: bool
     extra_dof: int
@@ -480,6 +483,7 @@ class Cogging:
     name: str = "cogging"
     neutral: bool = True
     extra_dof: int = 1  # p is chosen too
+    repeatable: bool = True  # harmonics of one place add up
 
     def places(self, diagram: Diagram) -> tuple[Place, ...]:
         return speeds(diagram)

@@ -39,12 +39,13 @@ from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify.problem import Problem, build_problem, metrics
 from ..identify.run import Identification, IdentifySettings, identify
+from ..identify.settings import REFIT_TAU
 from .effects import BUILTIN_EFFECTS, Effect, Scales
 from .residual import signal_correlation, whiteness
 from .score import Candidate, Score, Screen, screen
 
-__all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "refit_unit", "refusal", "REPORT_FORMAT",
-           "REPORT_VERSION"]
+__all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "refit_unit", "refusal", "fit_chart", "horizons",
+           "candidates", "done_key", "REPORT_FORMAT", "REPORT_VERSION"]
 
 REPORT_FORMAT = "sdnn-diagnose"
 REPORT_VERSION = 1
@@ -79,28 +80,25 @@ class DiagnoseSettings:
     # learned friction curve bent on the first 0.5 s of a 30 s record ends worse (friction bench: validation
     # RMS 0.079 against 0.056)
     horizon: int = 500
-    # trainlm's fixed first damping (IdentifySettings.lm_tau = 0): the brief refits start next to a fit, where
-    # identify's scaled damping spends the few iterations they have on short steps (measured on the backlash
-    # bench: validation RMS down 3.2x with 0, 2.2x with identify's 1e-3)
-    lm_tau: float = 0.0
+    lm_tau: float = REFIT_TAU  # see identify.settings: the brief refits start next to a fit
 
     def __post_init__(self) -> None:
         if self.rounds < 0:
-            raise ValueError("--rounds must not be negative")
+            raise ValueError("rounds must not be negative")
         if self.top < 1 or self.top_options < 1:
-            raise ValueError("--top and --top-options must be at least 1")
+            raise ValueError("top and top_options must be at least 1")
         if self.refit_iter < 1 or self.max_iter < 0:
-            raise ValueError("--refit-iter must be >= 1 and --max-iter >= 0")
+            raise ValueError("refit_iter must be >= 1 and max_iter >= 0")
         if not 0 < self.alpha < 1:
-            raise ValueError("--alpha must lie strictly between 0 and 1")
+            raise ValueError("alpha must lie strictly between 0 and 1")
         if self.criterion not in ("aic", "bic"):
-            raise ValueError("--criterion must be aic or bic")
+            raise ValueError("criterion must be 'aic' or 'bic'")
         if not 0 <= self.min_gain < 1:
-            raise ValueError("--min-gain must lie in [0, 1)")
+            raise ValueError("min_gain must lie in [0, 1)")
         if self.horizon < 0:
             raise ValueError("horizon must not be negative")
         if self.split is not None and not 0 < self.split < 1:
-            raise ValueError("--split must lie strictly between 0 and 1")
+            raise ValueError("split must lie strictly between 0 and 1")
 
 
 @dataclass(frozen=True, eq=False)
@@ -177,8 +175,9 @@ def _validate(ident: Identification, records: Sequence[tuple[Dataset, int]], ali
             "rms_records": [_rms_all([m], compiled.n_outputs) for m in per]}
 
 
-def _fit(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int, extra_dof: int,
-         start: str, progress: Progress | None = None, accepted: tuple = ()) -> Fitted:
+def fit_chart(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int,
+              extra_dof: int, start: str, progress: Progress | None = None, accepted: tuple = ()) -> Fitted:
+    """Fit `diagram` on the training records and score it on the validation `records` ((Dataset, first row))."""
     return _fitted(_identify(diagram, train, settings, max_iter, progress), records, settings, extra_dof, start,
                    accepted)
 
@@ -197,7 +196,7 @@ def _fitted(ident: Identification, records, settings: DiagnoseSettings, extra_do
                   _validate(ident, records, settings.alignment), start, accepted)
 
 
-def _horizons(train: Sequence[Dataset], first: int) -> list[int]:
+def horizons(train: Sequence[Dataset], first: int) -> list[int]:
     """The leading lengths (samples) of the growing-horizon stages before the fit on the whole records."""
     longest = max(d.n_rows for d in train)
     out, h = [], first
@@ -209,9 +208,9 @@ def _horizons(train: Sequence[Dataset], first: int) -> list[int]:
 
 def _fit_growing(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int,
                  extra_dof: int, start: str, accepted: tuple = ()) -> Fitted:
-    """:func:`_fit` on the leading parts of the training records (``settings.horizon`` samples, then 4x longer),
+    """:func:`fit_chart` on the leading parts of the training records (``settings.horizon`` samples, then 4x longer),
     each stage from the last one's fit, and finally on the whole records."""
-    for h in _horizons(train, settings.horizon):
+    for h in horizons(train, settings.horizon):
         try:
             ident = _identify(diagram, [d.slice(0, h) if d.n_rows > h else d for d in train], settings, max_iter)
         except (SdnnError, ValueError, KeyError):
@@ -222,7 +221,7 @@ def _fit_growing(diagram: Diagram, train: list[Dataset], records, settings: Diag
         if cost is None or not math.isfinite(cost):
             break  # diverged on a short stage: continue from where it was
         diagram = ident.diagram
-    return _fit(diagram, train, records, settings, max_iter, extra_dof, start, None, accepted)
+    return fit_chart(diagram, train, records, settings, max_iter, extra_dof, start, None, accepted)
 
 
 def _current_problem(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> Problem:
@@ -281,7 +280,7 @@ def _num(x: float) -> float | None:
     return float(x) if x is not None and math.isfinite(x) else None
 
 
-def _candidates(effects: Sequence[Effect], current: Diagram, scales: Scales, done: set) -> list[Candidate]:
+def candidates(effects: Sequence[Effect], current: Diagram, scales: Scales, done: set) -> list[Candidate]:
     out = []
     for effect in effects:
         for place in effect.places(current):
@@ -336,10 +335,10 @@ def refusal(after: Fitted, before: Fitted, settings: DiagnoseSettings) -> str | 
 
 
 def _repeatable(effect: Effect) -> bool:
-    return bool(getattr(effect, "repeatable", effect.name == "cogging"))
+    return bool(getattr(effect, "repeatable", False))
 
 
-def _done_key(c: Candidate) -> tuple:
+def done_key(c: Candidate) -> tuple:
     """What an accepted candidate takes off the list: the effect at that place, or only that option of it for
     a repeatable effect (cogging harmonics) and for an option the effect says leaves room for its others
     (``leaves_room(option)``: friction's physical terms)."""
@@ -407,7 +406,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             progress(text, fraction)
 
     say("fitting the chart as given", 0.0)
-    nominal = _fit(diagram, train, records, settings, settings.max_iter, 0, "chart", say)
+    nominal = fit_chart(diagram, train, records, settings, settings.max_iter, 0, "chart", say)
     current, nominal_chart, extra_dof = nominal, diagram, 0
     rounds, candidates_out, accepted, screens = [], [], [], []
     done: set = set()
@@ -419,7 +418,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             raise KeyboardInterrupt
         for r in range(1, settings.rounds + 1):
             problem = _current_problem(current, train, settings)
-            cands = _candidates(effects, current.diagram, _scales(problem), done)
+            cands = candidates(effects, current.diagram, _scales(problem), done)
             if not cands:
                 stop_reason = "no_candidates"
                 break
@@ -467,7 +466,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             c = s.candidate
             say(f"round {r}: accepted {c.title()}; polishing", None)
             extra_dof += c.effect.extra_dof
-            polished = _fit(f.diagram, train, records, settings, settings.max_iter, extra_dof, f.start, None,
+            polished = fit_chart(f.diagram, train, records, settings, settings.max_iter, extra_dof, f.start, None,
                             f.accepted)
             stop_now = _was_interrupted(polished)
             if stop_now or not (polished.cost <= f.cost and polished.validation_rms <= f.validation_rms):
@@ -475,7 +474,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             rounds.append(_round_entry(r, s, current, polished, True, "validation RMS and "
                                        f"{settings.criterion.upper()} fell", settings))
             accepted.append({"effect": c.name, "at": c.at, "option": s.as_dict()["option"], "label": c.label})
-            done.add(_done_key(c))
+            done.add(done_key(c))
             nominal_chart = c.effect.patch(nominal_chart, c.place, c.option)
             current = polished
             if stop_now:
@@ -517,7 +516,7 @@ def refit_unit(unit: tuple) -> tuple[Fitted | None, float]:
     chart, train, records, settings, max_iter, dof, start, acc = unit
     t0 = time.perf_counter()
     try:
-        fitted = _fit(chart, train, records, settings, max_iter, dof, start, None, acc)
+        fitted = fit_chart(chart, train, records, settings, max_iter, dof, start, None, acc)
         if start == "nominal" and settings.horizon > 0 and not _was_interrupted(fitted):
             grown = _fit_growing(chart, train, records, settings, max_iter, dof, "horizon", acc)
             if _was_interrupted(grown) or grown.cost < fitted.cost:

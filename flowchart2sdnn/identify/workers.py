@@ -26,7 +26,7 @@ import numpy as np
 
 from ..fit.lm import LMResult, levenberg_marquardt
 
-__all__ = ["FitTask", "fit_task", "run_start", "fit_start", "run_online_start", "online_start"]
+__all__ = ["FitTask", "fit_task", "problem_of", "run_start", "fit_start", "run_online_start", "online_start"]
 
 # Problems kept per worker process: a multi-start needs one, a batch worker moves from file to file.
 _CACHE_SIZE = 4
@@ -79,7 +79,7 @@ _cache: OrderedDict[str, Any] = OrderedDict()
 _cache_lock = threading.Lock()
 
 
-def _problem(task: FitTask):
+def problem_of(task: FitTask):
     """The Problem of a task, built once per worker process (thread-safe for in-process Dask workers)."""
     from ..network.model import Network
     from ..network.runtime import CompiledNetwork
@@ -133,7 +133,7 @@ def fit_start(task: FitTask, start: np.ndarray) -> LMResult:
     -------
     LMResult
     """
-    return run_start(_problem(task), start, task.lower, task.upper, task.options)
+    return run_start(problem_of(task), start, task.lower, task.upper, task.options)
 
 
 def run_online_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, options,
@@ -154,4 +154,4 @@ def run_online_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.nd
 
 def online_start(task: FitTask, start: np.ndarray):
     """:func:`run_online_start` on the task's problem (``task.options`` an OnlineOptions; runs in any worker)."""
-    return run_online_start(_problem(task), start, task.lower, task.upper, task.options)
+    return run_online_start(problem_of(task), start, task.lower, task.upper, task.options)
