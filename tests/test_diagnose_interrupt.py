@@ -7,8 +7,8 @@ import json
 import pytest
 from diagnose_bench import chart, record
 
+from flowchart2sdnn.cli.diagnose import _json_safe
 from flowchart2sdnn.diagnose import loop
-from flowchart2sdnn.diagnose.cli import _json_safe
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
 

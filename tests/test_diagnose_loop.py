@@ -14,8 +14,8 @@ from click.testing import CliRunner
 from diagnose_bench import DATA, chart, record
 
 from flowchart2sdnn.cli import main
+from flowchart2sdnn.cli.diagnose import _json_safe
 from flowchart2sdnn.data.csvdata import write_csv
-from flowchart2sdnn.diagnose.cli import _json_safe
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
 from flowchart2sdnn.diagram.validate import load_diagram

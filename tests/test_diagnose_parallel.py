@@ -7,7 +7,7 @@ import json
 import pytest
 from diagnose_bench import chart, record
 
-from flowchart2sdnn.diagnose.cli import _json_safe
+from flowchart2sdnn.cli.diagnose import _json_safe
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose, refit_unit
 from flowchart2sdnn.executors import DaskExecutor, ProcessExecutor, SerialExecutor
