@@ -59,7 +59,7 @@ def test_library_never_imports_the_cli_layer_or_click():
         if CLI in path.parents or path.name == "__main__.py":
             continue
         text = path.read_text(encoding="utf-8")
-        if re.search(r"^\s*(import click|from click)|flowchart2sdnn\.cli|from \.+cli\b", text, re.M):
+        if re.search(r"^\s*(from|import)\s+(click|flowchart2sdnn\.cli|\.+cli)\b|[\"']flowchart2sdnn\.cli", text, re.M):
             offenders.append(str(path.relative_to(PACKAGE)))
     assert offenders == []
 
@@ -97,3 +97,29 @@ def test_identify_maps_its_settings_errors_to_its_flags(tmp_path, monkeypatch):
     res = CliRunner().invoke(main, ["identify", str(data), "--diagram", str(LAG), "--quiet"])
     assert res.exit_code == 2, res.output
     assert "--starts must be at least 1" in res.output and "Traceback" not in res.output
+
+
+def test_simulate_chart_is_what_sdnn_simulate_writes(tmp_path):
+    """The library function behind `sdnn simulate`: the same columns, no click needed."""
+    import numpy as np
+
+    from flowchart2sdnn.data.csvdata import read_csv
+    from flowchart2sdnn.diagram.validate import load_diagram
+    from flowchart2sdnn.simulate.run import simulate_chart, simulation_columns
+
+    data = tmp_path / "d.csv"
+    data.write_text("time,w1\n" + "".join(f"{k * 0.001:.3f},{np.sin(k / 5):.6f}\n" for k in range(50)))
+    diagram = load_diagram(LAG)
+    assert simulation_columns(diagram) == ["w1"]
+    ds = read_csv(data, simulation_columns(diagram), {}, diagram.sample_time)
+    for extra, kwargs in (([], {}), (["--signals", "all"], {"all_signals": True}),
+                          (["--continuous"], {"continuous": True}), (["--alignment", "direct"], {"alignment": "direct"})):
+        columns = simulate_chart(diagram, ds, **kwargs)
+        assert list(columns)[:2] == ["time", "w2"] and all(len(v) == 50 for v in columns.values())
+        assert (len(columns) > 2) == bool(kwargs.get("all_signals"))
+        res = CliRunner().invoke(main, ["simulate", str(LAG), str(data), *extra])
+        assert res.exit_code == 0, res.output
+        lines = res.output.splitlines()
+        assert lines[0] == ",".join(columns)
+        written = np.array([[float(x) for x in line.split(",")] for line in lines[1:]])
+        np.testing.assert_allclose(written, np.column_stack(list(columns.values())), rtol=1e-9, atol=1e-12)
