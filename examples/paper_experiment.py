@@ -33,7 +33,7 @@ from __future__ import annotations
 
 import os
 
-# Small matrices (P ~ 10): threaded BLAS only adds contention on a shared machine (see flowchart2sdnn/cli.py).
+# Small matrices (P ~ 10): threaded BLAS only adds contention on a shared machine (see flowchart2sdnn/cli/__init__.py).
 # Set before numpy is first imported; a user's own setting wins.
 for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")

@@ -32,7 +32,6 @@ from .errors import SdnnError
 from .identify.document import read_result
 from .identify.result import Identification
 from .identify.run import identify as _identify
-from .identify.settings import IdentifySettings
 
 __all__ = ["load_chart", "compile_chart", "read_csv", "dataset_from_frame", "identify", "diagnose", "read_result"]
 
@@ -126,7 +125,7 @@ def identify(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset], val
     name to an :class:`~flowchart2sdnn.identify.result.Estimate` (value, ci95, unit), ``.chart`` is the
     identified chart, ``.simulate(data)`` runs it, ``.to_json()`` is the RESULT.json text.
     """
-    return _identify(_chart(chart), data, validation, IdentifySettings(**settings))
+    return _identify(_chart(chart), data, validation, **settings)
 
 
 def diagnose(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset],

@@ -85,9 +85,9 @@ def test_nothing_is_added_to_a_chart_that_lacks_nothing():
 
 
 def test_settings_are_checked():
-    with pytest.raises(ValueError, match="--criterion"):
+    with pytest.raises(ValueError, match="^criterion must be"):
         DiagnoseSettings(criterion="hqc")
-    with pytest.raises(ValueError, match="--min-gain"):
+    with pytest.raises(ValueError, match="^min_gain must lie"):
         DiagnoseSettings(min_gain=1.5)
 
 

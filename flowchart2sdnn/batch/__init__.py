@@ -1,7 +1,8 @@
 """Fleets: identify one chart on many data files (`sdnn batch`) and watch the parameters drift (`sdnn report`).
 
 Modules: :mod:`.run` (run_batch, identify_file), :mod:`.results` (the resumable results table),
-:mod:`.report` (drift per drive and the plots), :mod:`.cli` (the commands). Importing this package is cheap:
+:mod:`.drift` (drift per drive and the plots); the commands live in :mod:`flowchart2sdnn.cli.batch` and
+:mod:`flowchart2sdnn.cli.report`. Importing this package is cheap:
 the names below load their module on first use, so `sdnn --help` does not pay for numba.
 """
 
@@ -14,7 +15,7 @@ __all__ = ["BatchSettings", "BatchSummary", "run_batch", "identify_file", "read_
 
 _WHERE = {"BatchSettings": "run", "BatchSummary": "run", "run_batch": "run", "identify_file": "run",
           "read_results": "results", "columns_for": "results",
-          "load_fleet": "report", "drift_table": "report", "write_report": "report"}
+          "load_fleet": "drift", "drift_table": "drift", "write_report": "drift"}
 
 
 def __getattr__(name: str):

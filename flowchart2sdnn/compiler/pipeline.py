@@ -16,7 +16,7 @@ from ..analysis.lint import lint_diagram
 from ..analysis.loops import LoopReport, analyse_loops
 from ..diagram.model import Diagram
 from ..diagram.validate import load_diagram
-from ..errors import SdnnError
+from ..errors import Diagnostic, SdnnError
 from ..network.model import Network
 from .discretize import DiscreteChart, discretize
 from .emit import emit_network
@@ -73,3 +73,29 @@ def compile_file(path: str | Path, seed: int = 0) -> Compilation:
     """Load, validate and compile a chart file."""
     with _collector_paused():
         return _compile(load_diagram(path), seed)
+
+
+def check_file(path: str | Path) -> list[Diagnostic]:
+    """Every problem of the chart file at `path`, errors and warnings (what `sdnn lint` reports).
+
+    Parameters
+    ----------
+    path : str or Path
+        The chart (YAML).
+
+    Returns
+    -------
+    list of Diagnostic
+        Those of loading and validating, of lint, and, when lint finds no error, of compiling (what only the
+        compiler finds: a loop of gains, an overflowing weight). Empty for a clean chart; never raises
+        SdnnError.
+    """
+    diagnostics: list[Diagnostic] = []
+    try:
+        diagram = load_diagram(path)
+        diagnostics = lint_diagram(diagram)
+        if not any(d.severity == "error" for d in diagnostics):
+            compile_diagram(diagram)
+    except SdnnError as exc:
+        diagnostics = diagnostics + list(exc.diagnostics)
+    return diagnostics

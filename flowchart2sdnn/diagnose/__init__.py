@@ -2,7 +2,7 @@
 
 Pipeline: residual tests (:mod:`.residual`) -> the effects library (:mod:`.effects`, :mod:`.usereffects`) ->
 the score test of every candidate (:mod:`.score`) -> brief refits and acceptance (:mod:`.loop`) -> text
-report (:mod:`.report`); the click command lives in :mod:`.cli`.
+report (:mod:`.summary`); the click command lives in :mod:`flowchart2sdnn.cli.diagnose`.
 """
 
 from __future__ import annotations
@@ -10,7 +10,7 @@ from __future__ import annotations
 import importlib
 
 # Importing this package is cheap: a name loads its module on first use, so `sdnn --help` (which imports
-# diagnose.cli to register the command) does not pay for numba and scipy.
+# cli.diagnose to register the command) does not pay for numba and scipy.
 _WHERE = {
     **dict.fromkeys(("BUILTIN_EFFECTS", "Backlash", "Cogging", "Damping", "DeadTime", "DeadZone", "Effect",
                      "Friction", "Saturation", "Scales"), "effects"),

@@ -67,6 +67,7 @@ __all__ = [
     "Cogging",
     "BUILTIN_EFFECTS",
     "builtin_effects",
+    "effect_library",
     "select_effects",
 ]
 
@@ -532,6 +533,41 @@ BUILTIN_EFFECTS: dict[str, Effect] = {
 def builtin_effects() -> dict[str, Effect]:
     """A copy of the registry: name -> effect with its default options."""
     return dict(BUILTIN_EFFECTS)
+
+
+def effect_library(dead_time_max: int | None = None, harmonics: Sequence[int] | None = None,
+                   user: Mapping[str, Effect] | None = None) -> dict[str, Effect]:
+    """The effects diagnose can choose from: the built-in ones with the scan options given, then the user's.
+
+    Parameters
+    ----------
+    dead_time_max : int, optional
+        dead_time scans n = 1..this many samples (default: DeadTime's).
+    harmonics : sequence of int, optional
+        The cogging harmonics p to try (default: Cogging's).
+    user : mapping of str to Effect, optional
+        User effects by name, e.g. from :func:`flowchart2sdnn.diagnose.usereffects.load_effects_file`.
+
+    Returns
+    -------
+    dict of str to Effect
+        Name -> effect, built-in ones first.
+
+    Raises
+    ------
+    ValueError
+        When a user effect has the name of a built-in effect.
+    """
+    library = builtin_effects()
+    if dead_time_max is not None:
+        library["dead_time"] = replace(library["dead_time"], max_samples=dead_time_max)
+    if harmonics is not None:
+        library["cogging"] = replace(library["cogging"], harmonics=tuple(harmonics))
+    for name, effect in (user or {}).items():
+        if name in library:
+            raise ValueError(f"effect '{name}' has the name of a built-in effect")
+        library[name] = effect
+    return library
 
 
 def select_effects(names: Sequence[str] | None, available: Mapping[str, Effect],

@@ -1,4 +1,7 @@
-"""The chart: YAML loading, validation and the frozen IR."""
+"""The chart: YAML loading, validation, the frozen IR and the writer back to YAML.
+
+Layer 2: imports only the expression language and errors below it (tests/test_layers.py checks every layer).
+"""
 
 from .model import Block, Diagram, NonlinearWeights, Parameter, Signal, Term
 from .validate import diagram_from_text, load_diagram

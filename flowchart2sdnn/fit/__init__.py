@@ -1,4 +1,5 @@
-"""Parameter fitting: bounds transform, Levenberg-Marquardt, covariance, multistart and the fit result.
+"""Parameter fitting: bounds transform, Levenberg-Marquardt, covariance and multistart.
 
-Generic numerics: the trainer sees a residual/Jacobian callback, never a network.
+Layer 2, generic numerics: the trainer sees a residual/Jacobian callback, never a network (imports nothing of
+ours).
 """

@@ -1,0 +1,5 @@
+"""`python -m flowchart2sdnn.cli ...` is `sdnn ...`."""
+
+from . import main
+
+main()

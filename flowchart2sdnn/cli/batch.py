@@ -1,0 +1,116 @@
+"""`sdnn batch`: identify one chart on a fleet of data files, resumably (the click layer over batch.run).
+
+Layer rule: :mod:`flowchart2sdnn.cli` is the top layer, the only place that knows click, exit codes and
+terminal output; library modules never import it.
+"""
+
+from __future__ import annotations
+
+import glob
+import os
+
+import click
+
+from ..errors import SdnnError
+from .options import (
+    alignment_option,
+    executor_options,
+    force_option,
+    handle_errors,
+    map_option,
+    max_iter_option,
+    seed_option,
+    settings_usage,
+)
+from .terminal import BatchBar
+
+__all__ = ["batch", "expand_files"]
+
+_GLOB_CHARS = set("*?[")
+
+
+def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> list[str]:
+    """Files named or matched (``**`` recursive) by the arguments, sorted and without repeats.
+
+    A directory stands for the ``*.csv`` files in it. Quoted globs are expanded here, so fleets larger than the
+    shell's argument limit work. Files in `exclude` (the results table itself) are left out.
+    """
+    skip = {os.path.realpath(e) for e in exclude}
+    out: dict[str, None] = {}
+    for pattern in patterns:
+        if os.path.isdir(pattern):
+            matches = sorted(glob.glob(os.path.join(glob.escape(pattern), "*.csv")))
+        elif os.path.exists(pattern) or not (_GLOB_CHARS & set(pattern)):
+            matches = [pattern]
+        else:
+            matches = sorted(glob.glob(pattern, recursive=True))
+            if not matches:
+                raise SdnnError.at("BATCH001", f"no file matches '{pattern}'")
+        for m in matches:
+            if os.path.realpath(m) not in skip and not os.path.basename(m).startswith(".sdnn-tmp."):
+                out.setdefault(m, None)
+    return list(out)
+
+
+@click.command(name="batch")
+@click.argument("chart", type=click.Path(dir_okay=False))
+@click.argument("data", nargs=-1, required=True)
+@click.option("-o", "--output", type=click.Path(dir_okay=False), default="results.csv", show_default=True,
+              help="Results table: .csv (appended after each file) or .parquet (needs pyarrow).")
+@click.option("--fix-from", type=click.Path(dir_okay=False),
+              help="Fix parameters and nonlinear blocks with matching names from an earlier RESULT.json.")
+@executor_options("the files' identifications")
+@click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Multi-start per file (seeded starts, the first is the chart's init).")
+@seed_option()
+@max_iter_option()
+@alignment_option(None)
+@map_option()
+@click.option("--retry-errors", is_flag=True, help="Redo files whose earlier row is an error.")
+@force_option("Start the results table over (it holds other settings).")
+@click.option("--diagnose", is_flag=True,
+              help="Also diagnose each file; the effects it adds (e.g. friction) go to the 'effects' column.")
+@click.option("--quiet", is_flag=True, help="No progress bar and no summary.")
+@handle_errors
+def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_iter, alignment, mapping,
+          retry_errors, force, diagnose, quiet) -> None:
+    """Identify CHART on every DATA file (paths, directories or quoted globs): one row per file in OUTPUT.
+
+    Rerunning the same command skips the files already done, so an interrupted run resumes.
+    """
+    from ..atomic import check_output_path
+    from ..batch.run import BatchSettings, run_batch
+    from ..data.csvdata import parse_mapping
+    from ..diagram.validate import load_diagram
+    from ..executors import make_executor
+    from ..identify.document import fix_from_result
+    from ..identify.run import IdentifySettings
+
+    if workers and scheduler and scheduler != "local":
+        raise click.UsageError("give either --workers or --scheduler ADDRESS (--workers sizes only 'local')")
+    files = expand_files(data, exclude=(output, f"{output}.lock"))
+    check_output_path(output, [chart] + ([fix_from] if fix_from else []) + files, force=True)
+    diagram = load_diagram(chart)
+    fixed: list[str] = []
+    if fix_from:
+        diagram, fixed = fix_from_result(diagram, fix_from)
+    with settings_usage():
+        settings = BatchSettings(
+            identify=IdentifySettings(starts=starts, seed=seed, max_iter=max_iter, alignment=alignment,
+                                      fixed_from=tuple(fixed)),
+            mapping=tuple(sorted(parse_mapping(mapping).items())), retry_errors=retry_errors, force=force,
+            diagnose=diagnose)
+    bar = BatchBar(len(files), quiet)
+    with make_executor(workers, scheduler) as executor:
+        if not quiet:
+            click.echo(f"{len(files)} file(s), {executor.describe()}", err=True)
+        summary = run_batch(diagram, files, output, settings, executor, bar)
+    if not quiet:
+        click.echo(f"wrote {output}: {summary.identified} identified, {summary.failed} failed, "
+                   f"{summary.skipped} already done, {summary.copied} copied (same content) in "
+                   f"{summary.seconds:.1f} s ({summary.files_per_second:.2f} files/s)")
+        if summary.dropped_lines:
+            click.echo(f"note: {summary.dropped_lines} torn line(s) of an interrupted run were dropped "
+                       "and their files redone", err=True)
+    if summary.failed:
+        click.echo(f"{summary.failed} file(s) failed: see the 'error' column of {output}", err=True)

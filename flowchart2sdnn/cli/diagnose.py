@@ -1,0 +1,180 @@
+"""`sdnn diagnose`: the click layer over diagnose.loop (formatting lives in diagnose.summary).
+
+Layer rule: :mod:`flowchart2sdnn.cli` is the top layer, the only place that knows click, exit codes and
+terminal output; library modules never import it.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import click
+
+from ..strictjson import strict_json
+from .options import (
+    alignment_option,
+    executor_options,
+    force_option,
+    handle_errors,
+    map_option,
+    max_iter_option,
+    seed_option,
+    settings_usage,
+)
+from .terminal import Progress
+
+__all__ = ["diagnose", "parse_effects"]
+
+
+def parse_effects(text: str | None) -> list[str] | None:
+    """``"friction, dead_time"`` -> ["friction", "dead_time"]; None stays None."""
+    if text is None:
+        return None
+    return [t.strip() for t in text.split(",") if t.strip()]
+
+
+def _int_list(text: str) -> tuple[int, ...]:
+    try:
+        values = tuple(int(t) for t in text.split(",") if t.strip())
+    except ValueError:
+        raise click.BadParameter(f"expected whole numbers separated by commas, got {text!r}") from None
+    if not values or any(v < 1 for v in values):
+        raise click.BadParameter("expected at least one whole number >= 1")
+    return values
+
+
+@click.command(name="diagnose")
+@click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.option("--diagram", "chart", required=True, type=click.Path(dir_okay=False),
+              help="The chart (YAML); it is never modified.")
+@click.option("--validate", "validation", multiple=True, type=click.Path(dir_okay=False),
+              help="Validation record (CSV); repeatable (e.g. several short records of a chaotic drive).")
+@click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
+              help="Train on this leading fraction of DATA, validate on the rest (default without "
+                   "--validate: 0.7).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="Write the augmented, identified chart (YAML).")
+@click.option("--report", "report_path", type=click.Path(dir_okay=False), help="Write REPORT.json.")
+@click.option("--rounds", type=click.IntRange(min=0), default=3, show_default=True,
+              help="At most this many effects are added.")
+@click.option("--effects", "effect_names", metavar="NAME,NAME",
+              help="Effects to try (default: all built-in and all from --effects-file).")
+@click.option("--effects-file", type=click.Path(dir_okay=False),
+              help="User effects: chart fragments with placeholders (YAML, 'sdnn_effects: 1').")
+@click.option("--plots", type=click.Path(file_okay=False),
+              help="Directory for the figures (residual against the traced signal, before and after).")
+@click.option("--refit-iter", type=click.IntRange(min=1), default=40, show_default=True,
+              help="LM iterations of each brief refit of a candidate.")
+@max_iter_option("LM iterations of the first fit and of each accepted chart.")
+@click.option("--horizon", type=click.IntRange(min=0), default=500, show_default=True,
+              help="Samples of the first stage of the growing-horizon refit of a non-neutral candidate (a gap, "
+                   "clip or delay) from the chart as given; 0: off.")
+@click.option("--top", type=click.IntRange(min=1), default=5, show_default=True,
+              help="Places refitted per round (the best option of each).")
+@click.option("--criterion", type=click.Choice(["aic", "bic"]), default="bic", show_default=True,
+              help="Information criterion that must fall for an effect to be accepted.")
+@click.option("--min-gain", type=click.FloatRange(0, 1, max_open=True), default=0.02, show_default=True,
+              help="The validation RMS must fall by at least this fraction.")
+@click.option("--alpha", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=1e-3,
+              show_default=True, help="Significance level of the score test.")
+@click.option("--dead-time-max", type=click.IntRange(min=1, max=10000), default=20, show_default=True,
+              help="dead_time scans n = 1..this many samples.")
+@click.option("--harmonics", default="1,2,3,4,6,8,12", show_default=True,
+              help="cogging harmonics p to try.")
+@alignment_option()
+@map_option()
+@seed_option("Seed for initial curves.")
+@force_option()
+@click.option("--quiet", is_flag=True, help="No progress and no report text.")
+@executor_options("the candidate refits")
+@handle_errors
+def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
+             refit_iter, max_iter, horizon, top, criterion, min_gain, alpha, dead_time_max, harmonics, alignment,
+             mapping, seed, force, quiet, workers=None, scheduler=None) -> None:
+    """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
+    chart, refit, and report the error before and after."""
+    from ..atomic import atomic_write_text, check_output_path
+    from ..data.csvdata import parse_mapping, read_csv
+    from ..diagnose.effects import effect_library, select_effects
+    from ..diagnose.loop import DiagnoseSettings
+    from ..diagnose.loop import diagnose as run_diagnose
+    from ..diagnose.summary import format_report
+    from ..diagram.dump import dump_diagram
+    from ..diagram.validate import load_diagram
+    from ..identify.problem import required_columns
+
+    if validation and split:
+        raise click.UsageError("give either --validate or --split, not both")
+    cogging_p = _int_list(harmonics)
+    inputs = list(data) + [chart] + list(validation) + ([effects_file] if effects_file else [])
+    for path in (output, report_path):
+        if path:
+            check_output_path(path, inputs, force=force)
+    if output and report_path and output == report_path:
+        raise click.UsageError("-o and --report name the same file")
+    if plots:
+        from ..identify.plots import require_matplotlib
+
+        require_matplotlib()
+    user = {}
+    if effects_file:
+        from ..diagnose.usereffects import load_effects_file
+
+        user = load_effects_file(effects_file)
+    try:
+        library = effect_library(dead_time_max=dead_time_max, harmonics=cogging_p, user=user)
+    except ValueError as exc:
+        raise click.UsageError(f"{effects_file}: {exc}") from None
+    effects = select_effects(parse_effects(effect_names), library)
+    diagram = load_diagram(chart)
+    maps = parse_mapping(mapping)
+    cols = required_columns(diagram)
+    train = [read_csv(d, cols, maps, diagram.sample_time) for d in data]
+    val = [read_csv(v, cols, maps, diagram.sample_time) for v in validation]
+    with settings_usage():
+        settings = DiagnoseSettings(rounds=rounds, top=top, refit_iter=refit_iter, max_iter=max_iter,
+                                    alpha=alpha, criterion=criterion, min_gain=min_gain, alignment=alignment,
+                                    seed=seed, split=split, horizon=horizon)
+    progress = Progress(quiet)
+    executor = None
+    try:
+        if workers is not None or scheduler is not None:
+            from ..executors import make_executor
+
+            executor = make_executor(workers, scheduler)
+        outcome = run_diagnose(diagram, train if len(train) > 1 else train[0], val, settings, effects, progress,
+                               executor=executor)
+    except BaseException:
+        if executor is not None:
+            executor.close(cancel=True)
+        raise
+    finally:
+        progress.close()
+    if executor is not None:
+        # after Ctrl-C the refits still running are dropped, not waited for
+        executor.close(cancel=bool(outcome.report.get("interrupted")))
+    report = outcome.report
+    report["command"] = {"data": list(data), "diagram": chart, "validate": list(validation),
+                         "effects_file": effects_file, "output": output, "map": dict(maps)}
+    report_text = json.dumps(strict_json(report), indent=1, allow_nan=False) + "\n"
+    chart_text = dump_diagram(outcome.diagram, {"from": "sdnn diagnose", "chart": chart,
+                                                "accepted": [f"{a['effect']} at {a['at']}"
+                                                             + (f" ({a['label']})" if a["label"] else "")
+                                                             for a in report["accepted"]]})
+    if output:
+        atomic_write_text(output, chart_text)
+    if report_path:
+        atomic_write_text(report_path, report_text)
+    written = []
+    if plots:
+        from ..diagnose.plots import write_plots
+
+        written = write_plots(outcome, train[0], plots)
+    if not quiet:
+        click.echo(format_report(report), nl=False)
+        for path in [p for p in (output, report_path) if p] + [str(w) for w in written]:
+            click.echo(f"wrote {path}")
+    if report.get("interrupted"):
+        click.echo("interrupted: the chart and report hold what was accepted before Ctrl-C", err=True)
+        sys.exit(1)

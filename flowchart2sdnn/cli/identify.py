@@ -1,0 +1,133 @@
+"""`sdnn identify`: the click layer over identify.run (formatting lives in identify.summary).
+
+Layer rule: :mod:`flowchart2sdnn.cli` is the top layer, the only place that knows click, exit codes and
+terminal output; library modules never import it.
+"""
+
+from __future__ import annotations
+
+import sys
+from pathlib import Path
+
+import click
+
+from .options import (
+    alignment_option,
+    executor_options,
+    force_option,
+    handle_errors,
+    map_option,
+    max_iter_option,
+    seed_option,
+    settings_usage,
+)
+from .terminal import CtrlC, Progress
+
+__all__ = ["identify"]
+
+
+@click.command(name="identify")
+@click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
+@click.option("--diagram", "chart", required=True, type=click.Path(dir_okay=False), help="The chart (YAML).")
+@click.option("-o", "--output", type=click.Path(dir_okay=False),
+              help="RESULT.json; the identified chart is written beside it as RESULT.chart.yaml.")
+@click.option("--fix-from", type=click.Path(dir_okay=False),
+              help="Fix parameters and nonlinear blocks with matching names from an earlier RESULT.json.")
+@click.option("--validate", "validation", type=click.Path(dir_okay=False), help="Validation record (CSV).")
+@click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
+              help="Train on this leading fraction of DATA, validate on the rest.")
+@click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Multi-start: number of seeded starts (the first is the chart's init); with --online, that many "
+                   "quasi-online runs, the one with the lowest final window cost reported.")
+@seed_option("Seed for starts and initial curves.")
+@click.option("--online", is_flag=True, help="Quasi-online LM over a sliding window (paper section 3.1).")
+@click.option("--window", type=click.IntRange(min=2), default=25000, show_default=True,
+              help="Quasi-online window Q (samples).")
+@click.option("--average", type=click.IntRange(min=1), default=25000, show_default=True,
+              help="Quasi-online: report the mean over the last K steps.")
+@max_iter_option()
+@alignment_option()
+@map_option()
+@click.option("--plots", type=click.Path(file_okay=False),
+              help="Directory for the figures (PNG; created if needed, figures of the same name replaced). "
+                   "Needs matplotlib: pip install flowchart2sdnn[plots].")
+@force_option()
+@click.option("--quiet", is_flag=True, help="No progress and no table.")
+@executor_options("the multi-start fits")
+@handle_errors
+def identify(data, chart, output, fix_from, validation, split, starts, seed, online, window, average,
+             max_iter, alignment, mapping, plots, force, quiet, workers=None, scheduler=None) -> None:
+    """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
+    together, each simulated from its own initial state)."""
+    from ..atomic import atomic_write_text, check_output_path
+    from ..data.csvdata import parse_mapping, read_csv
+    from ..diagram.dump import dump_diagram
+    from ..diagram.validate import load_diagram
+    from ..errors import SdnnError
+    from ..identify.document import dumps, fix_from_result
+    from ..identify.problem import required_columns
+    from ..identify.run import IdentifySettings
+    from ..identify.run import identify as run_identify
+    from ..identify.summary import format_result
+
+    if validation and split:
+        raise click.UsageError("give either --validate or --split, not both")
+    inputs = [*data, chart] + [p for p in (fix_from, validation) if p]
+    if plots:
+        from ..identify.plots import require_matplotlib
+
+        require_matplotlib()  # before any work: a missing extra must not cost a whole run
+    chart_out = None
+    if output:
+        chart_out = str(Path(output).with_suffix("")) + ".chart.yaml"
+        check_output_path(output, inputs, force=force)
+        check_output_path(chart_out, inputs, force=force)
+    diagram = load_diagram(chart)
+    fixed = []
+    if fix_from:
+        diagram, fixed = fix_from_result(diagram, fix_from)
+    maps = parse_mapping(mapping)
+    cols = required_columns(diagram)
+    train = [read_csv(d, cols, maps, diagram.sample_time) for d in data]
+    val = read_csv(validation, cols, maps, diagram.sample_time) if validation else None
+    with settings_usage():
+        settings = IdentifySettings(starts=starts, seed=seed, max_iter=max_iter, alignment=alignment, split=split,
+                                    online=online, window=window, average=average, fixed_from=tuple(fixed))
+    progress = Progress(quiet)
+    ctrl_c = CtrlC()  # until the files are written: restored when the click context closes
+    click.get_current_context().call_on_close(ctrl_c.restore)
+    try:
+        if workers is None and scheduler is None:
+            outcome = run_identify(diagram, train, val, settings, progress, stop=ctrl_c)
+        else:
+            from ..executors import make_executor
+
+            with make_executor(workers, scheduler) as executor:
+                outcome = run_identify(diagram, train, val, settings, progress, executor=executor,
+                                       stop=ctrl_c)
+    finally:
+        progress.close()
+    if outcome.status == "diverged_at_start":
+        raise SdnnError.at("FIT001", outcome.message, chart,
+                           hint="the start values make the model unstable on this data: change 'init'")
+    if output:
+        extra = {"command": {"data": data[0] if len(data) == 1 else list(data), "diagram": chart,
+                             "fix_from": fix_from, "validate": validation, "map": dict(maps)},
+                 "identified_chart": chart_out}
+        # both texts first: a failure here must not leave one file without the other
+        chart_text = dump_diagram(outcome.diagram, {"from": output, "status": outcome.status})
+        result_text = dumps({**outcome.to_document(), **extra})
+        atomic_write_text(chart_out, chart_text)
+        atomic_write_text(output, result_text)
+    if plots:
+        from ..identify.plots import write_plots
+
+        write_plots(outcome, plots)
+    if not quiet:
+        click.echo(format_result(outcome, fixed), nl=False)
+        if output:
+            click.echo(f"wrote {output} and {chart_out}")
+    if outcome.status == "interrupted":
+        click.echo(f"interrupted: {'the best result so far is in ' + output if output else 'no -o, nothing written'}",
+                   err=True)
+        sys.exit(1)

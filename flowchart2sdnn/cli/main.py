@@ -1,0 +1,176 @@
+"""The `sdnn` group, its small commands (lint, compile, simulate, excite) and the registration of every command.
+
+Layer rule: :mod:`flowchart2sdnn.cli` is the top layer, the only place that knows click, exit codes and
+terminal output; library modules never import it. A command parses its flags, calls library functions and
+formats their answers, nothing more.
+
+Each command imports the library it needs inside its body: `sdnn --help` and `sdnn lint` should not pay for
+numba.
+"""
+
+from __future__ import annotations
+
+import json
+import sys
+
+import click
+
+from .. import __version__
+from .batch import batch
+from .diagnose import diagnose
+from .identify import identify
+from .options import alignment_option, force_option, handle_errors, map_option, seed_option
+from .report import report
+
+__all__ = ["main"]
+
+
+@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+@click.version_option(__version__, prog_name="sdnn")
+def main() -> None:
+    """Grey-box identification of mechatronic systems from a YAML signal flow chart."""
+
+
+# ------------------------------------------------------------------------------------------------ lint
+@main.command()
+@click.argument("chart", type=click.Path(dir_okay=False))
+@click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text", show_default=True)
+@handle_errors
+def lint(chart: str, fmt: str) -> None:
+    """Check CHART: loops, signals, units, bounds, identifiability. Exit 1 when any error."""
+    from ..compiler import check_file
+
+    diagnostics = check_file(chart)
+    errors = [d for d in diagnostics if d.severity == "error"]
+    if fmt == "json":
+        click.echo(json.dumps({"file": chart, "errors": len(errors), "diagnostics": [d.to_dict() for d in diagnostics]},
+                              indent=1))
+    else:
+        for d in diagnostics:
+            click.echo(d.one_line(), err=d.severity == "error")
+        warnings = len(diagnostics) - len(errors)
+        click.echo(f"{chart}: {len(errors)} error(s), {warnings} warning(s)", err=bool(errors))
+    if errors:
+        sys.exit(1)
+
+
+# ------------------------------------------------------------------------------------------------ compile
+@main.command(name="compile")
+@click.argument("chart", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", type=click.Path(dir_okay=False), help="Write the network file (JSON).")
+@click.option("--explain", is_flag=True, help="Print every weight as an equation and every delayed edge.")
+@click.option("--dot", type=click.Path(dir_okay=False), help="Write a Graphviz drawing of the network.")
+@seed_option("Seed for the initial learned weights.")
+@force_option()
+@handle_errors
+def compile_(chart: str, output: str | None, explain: bool, dot: str | None, seed: int, force: bool) -> None:
+    """Compile CHART into a structured GDNN with administration matrices."""
+    from ..atomic import atomic_write_text, check_output_path
+    from ..compiler import compile_file
+    from ..network.explain import explain_network, network_dot
+
+    for path in (output, dot):
+        if path:
+            check_output_path(path, [chart], force=force)
+    comp = compile_file(chart, seed=seed)
+    for w in comp.warnings:
+        click.echo(w.one_line(), err=True)
+    net = comp.network
+    if output:
+        atomic_write_text(output, net.to_json())
+    if dot:
+        atomic_write_text(dot, network_dot(net))
+    if explain:
+        click.echo(explain_network(net), nl=False)
+    elif not output and not dot:
+        click.echo(net.to_json(), nl=False)
+
+
+# ------------------------------------------------------------------------------------------------ simulate
+@main.command()
+@click.argument("chart", type=click.Path(dir_okay=False))
+@click.argument("data", type=click.Path(dir_okay=False))
+@click.option("-o", "--output", type=click.Path(dir_okay=False), help="Output CSV (default: stdout).")
+@click.option("--params", type=click.Path(dir_okay=False), help="Identified values from a RESULT.json.")
+@click.option("--continuous", is_flag=True, help="Simulate the chart itself with a fine-step ODE solver.")
+@click.option("--signals", type=click.Choice(["outputs", "all"]), default="outputs", show_default=True)
+@alignment_option()
+@map_option("Take chart signal NAME from COLUMN.")
+@force_option("Overwrite an existing output file.")
+@handle_errors
+def simulate(chart, data, output, params, continuous, signals, alignment, mapping, force) -> None:
+    """Run CHART on the inputs in DATA (CSV) and write time and output columns."""
+    import numpy as np
+
+    from ..atomic import check_output_path
+    from ..data.csvdata import parse_mapping, read_csv, write_csv
+    from ..diagram.validate import load_diagram
+    from ..simulate.run import simulate_chart, simulation_columns
+
+    if output:
+        check_output_path(output, [chart, data] + ([params] if params else []), force=force)
+    diagram = load_diagram(chart)
+    if params:
+        from ..identify.document import apply_result_file
+
+        diagram = apply_result_file(diagram, params)
+    ds = read_csv(data, simulation_columns(diagram), parse_mapping(mapping), diagram.sample_time)
+    columns = simulate_chart(diagram, ds, alignment=alignment, continuous=continuous, all_signals=signals == "all")
+    if output:
+        write_csv(output, columns)
+    else:
+        names = list(columns)
+        click.echo(",".join(names))
+        arr = np.column_stack([columns[n] for n in names])
+        for row in arr:
+            click.echo(",".join(f"{v:.10g}" for v in row))
+
+
+# ------------------------------------------------------------------------------------------------ excite
+@main.command()
+@click.argument("plant", type=click.Path(dir_okay=False))
+@click.option("--seconds", type=click.FloatRange(min=0, min_open=True), required=True)
+@seed_option()
+@click.option("-o", "--output", type=click.Path(dir_okay=False), required=True, help="Data CSV to write.")
+@click.option("--amplitude", nargs=2, type=float, default=(-7.0, 7.0), show_default=True,
+              help="APRBS level range.")
+@click.option("--hold", nargs=2, type=float, default=(0.010, 0.250), show_default=True,
+              help="APRBS hold time range, s.")
+@click.option("--relay-level", type=float, default=4.0, show_default=True)
+@click.option("--relay-switch", type=float, default=10.0, show_default=True,
+              help="Relay switches when |speed| exceeds this.")
+@click.option("--relay-band", type=float, default=2.0, show_default=True,
+              help="Relay output scaled while |speed| is below this.")
+@click.option("--relay-band-scale", type=float, default=0.2, show_default=True)
+@click.option("--noise", "noise_std", type=float, default=0.0, show_default=True,
+              help="Std of Gaussian measurement noise on every output.")
+@click.option("--input", "input_name", help="Excited input (default: the chart's first input).")
+@click.option("--speed", help="Signal the relay watches (default: the first output).")
+@click.option("--substeps", type=click.IntRange(1, 10000), default=20, show_default=True,
+              help="Integration steps per sample.")
+@force_option("Overwrite an existing output file.")
+@handle_errors
+def excite(plant, seconds, seed, output, amplitude, hold, relay_level, relay_switch, relay_band, relay_band_scale,
+           noise_std, input_name, speed, substeps, force) -> None:
+    """Virtual test bench: simulate PLANT continuously under the paper's APRBS + relay excitation."""
+    from ..atomic import check_output_path
+    from ..data.csvdata import write_csv
+    from ..diagram.validate import load_diagram
+    from ..simulate.excitation import ExcitationSettings
+    from ..simulate.excitation import excite as run_excite
+
+    check_output_path(output, [plant], force=force)
+    diagram = load_diagram(plant)
+    settings = ExcitationSettings(seconds=seconds, seed=seed, amplitude=tuple(amplitude), hold=tuple(hold),
+                                  relay_level=relay_level, relay_switch=relay_switch, relay_band=relay_band,
+                                  relay_band_scale=relay_band_scale, noise_std=noise_std, input=input_name,
+                                  speed=speed)
+    columns = run_excite(diagram, settings, substeps=substeps)
+    write_csv(output, columns)
+    n = len(columns["time"])
+    click.echo(f"wrote {output}: {n} samples ({seconds:g} s at T = {diagram.sample_time:g} s), seed {seed}", err=True)
+
+
+# ------------------------------------------------------------------------------------------------ the rest
+for _command in (identify, diagnose, batch, report):
+    main.add_command(_command)

@@ -1,0 +1,129 @@
+"""What every `sdnn` command shares: its options (each declared once, here), its error handling, and the
+mapping of library settings errors to usage errors.
+
+Layer rule: :mod:`flowchart2sdnn.cli` is the top layer, the only place that knows click, exit codes and
+terminal output; library modules never import it.
+
+Exit codes: 0 success, 1 a user error (bad chart, bad data, failed run; one line on stderr), 2 bad usage.
+"""
+
+from __future__ import annotations
+
+import functools
+import re
+import sys
+from collections.abc import Iterator, Mapping
+from contextlib import contextmanager
+
+import click
+
+from ..errors import SdnnError
+
+__all__ = ["fail", "handle_errors", "settings_usage", "executor_options", "force_option", "seed_option",
+           "map_option", "alignment_option", "max_iter_option", "ALIGNMENT_HELP"]
+
+ALIGNMENT_HELP = "zoh: input sample k acts on [t_k, t_k+1) (logged data); direct: output k uses input k."
+
+
+# ------------------------------------------------------------------------------------------------ errors
+def fail(message: str) -> None:
+    """One line on stderr, exit 1."""
+    click.echo(message, err=True)
+    sys.exit(1)
+
+
+def handle_errors(func):
+    """Turn library errors into one line on stderr and exit 1: never a traceback, never a partial file."""
+
+    @functools.wraps(func)
+    def wrapper(*args, **kwargs):
+        try:
+            return func(*args, **kwargs)
+        except SdnnError as exc:
+            first = exc.diagnostics[0].one_line()
+            more = len([d for d in exc.diagnostics if d.severity == "error"]) - 1
+            fail(first + (f" (+{more} more error(s); run 'sdnn lint' to see all)" if more > 0 else ""))
+        except KeyboardInterrupt:
+            fail("interrupted")
+        except (click.exceptions.Exit, click.ClickException, SystemExit):
+            raise
+        except MemoryError:
+            fail("error: out of memory")
+        except Exception as exc:  # noqa: BLE001 - the promise is one line, not a traceback
+            fail(f"internal error ({type(exc).__name__}): {' '.join(str(exc).split())[:300]} "
+                 "- please report this with the command line")
+
+    return wrapper
+
+
+def flag_words(message: str, flags: Mapping[str, str]) -> str:
+    """`message` with each settings field name (``max_iter``) replaced by its flag (``--max-iter``).
+
+    A name already written as a flag (``--starts``) is left alone, so the message reads the same whether the
+    library names its fields or (as it used to) the command line's flags.
+    """
+    for name in sorted(flags, key=len, reverse=True):
+        message = re.sub(rf"(?<![\w-]){re.escape(name)}(?![\w-])", flags[name], message)
+    return message
+
+
+@contextmanager
+def settings_usage(**extra_flags: str) -> Iterator[None]:
+    """Library settings refuse a bad value in library words (``starts must be at least 1``); on the command line
+    that is a usage error naming the flag (``--starts must be at least 1``), exit 2.
+
+    The flags are those of the running command (a field ``max_iter`` is the option ``--max-iter``), plus
+    `extra_flags` for fields named otherwise (``split="--split"``).
+    """
+    try:
+        yield
+    except ValueError as exc:
+        flags: dict[str, str] = {}
+        ctx = click.get_current_context(silent=True)
+        if ctx is not None:
+            for param in ctx.command.params:
+                longs = [o for o in param.opts if o.startswith("--")]
+                if isinstance(param, click.Option) and longs and param.name:
+                    flags[param.name] = longs[0]
+                    flags[longs[0][2:].replace("-", "_")] = longs[0]
+        flags.update(extra_flags)
+        raise click.UsageError(flag_words(str(exc), flags), ctx=ctx) from None
+
+
+# ------------------------------------------------------------------------------------------------ options
+def force_option(help: str = "Overwrite existing output files."):
+    """``--force``: overwrite what a command writes (worded per command)."""
+    return click.option("--force", is_flag=True, help=help)
+
+
+def seed_option(help: str | None = None):
+    """``--seed N`` (default 0): seeds starts, initial curves or weights, or an excitation."""
+    return click.option("--seed", type=int, default=0, show_default=True, help=help)
+
+
+def map_option(help: str = "Take chart signal NAME from CSV column COLUMN (repeatable)."):
+    """``--map NAME=COLUMN`` (repeatable), passed on as ``mapping``; see data.csvdata.parse_mapping."""
+    return click.option("--map", "mapping", multiple=True, metavar="NAME=COLUMN", help=help)
+
+
+def alignment_option(help: str | None = ALIGNMENT_HELP):
+    """``--alignment zoh|direct`` (default zoh); see network.alignment."""
+    return click.option("--alignment", type=click.Choice(["zoh", "direct"]), default="zoh", show_default=True,
+                        help=help)
+
+
+def max_iter_option(help: str | None = None):
+    """``--max-iter N`` (default 100): Levenberg-Marquardt iterations."""
+    return click.option("--max-iter", type=click.IntRange(min=0), default=100, show_default=True, help=help)
+
+
+def executor_options(work: str):
+    """`--workers N` and `--scheduler ADDRESS` (see flowchart2sdnn.executors.make_executor), worded for `work`."""
+
+    def decorate(func):
+        func = click.option("--scheduler", metavar="ADDRESS",
+                            help=f"Run {work} on a Dask cluster (tcp://host:8786, or 'local').")(func)
+        return click.option("--workers", type=click.IntRange(min=1),
+                            help=f"Run {work} in N local worker processes.")(func)
+
+    return decorate
