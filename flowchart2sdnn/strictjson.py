@@ -7,7 +7,7 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["strict_json"]
+__all__ = ["strict_json", "finite_or_none"]
 
 
 def strict_json(obj, path: str = "", bad: list[str] | None = None):
@@ -26,3 +26,11 @@ def strict_json(obj, path: str = "", bad: list[str] | None = None):
     if isinstance(obj, (list, tuple)):
         return [strict_json(v, f"{path}[{i}]", bad) for i, v in enumerate(obj)]
     return obj
+
+
+def finite_or_none(x) -> float | None:
+    """A number as a float, or None when it is None, NaN or infinite (a metric of a diverged run)."""
+    if x is None:
+        return None
+    x = float(x)
+    return x if math.isfinite(x) else None

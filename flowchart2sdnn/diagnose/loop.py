@@ -40,6 +40,7 @@ from ..errors import SdnnError
 from ..identify.problem import Problem, build_problem, metrics
 from ..identify.run import Identification, IdentifySettings, identify
 from ..identify.settings import REFIT_TAU
+from ..strictjson import finite_or_none
 from .effects import BUILTIN_EFFECTS, Effect, Scales
 from .residual import signal_correlation, whiteness
 from .score import Candidate, Score, Screen, screen
@@ -270,14 +271,10 @@ def residual_analysis(fitted: Fitted, train: list[Dataset], settings: DiagnoseSe
 def _summary(f: Fitted) -> dict:
     res = f.identification.fit.train
     val = f.validation["records"]
-    return {"rms": _num(f.rms), "validation_rms": _num(f.validation_rms), "aic": _num(f.aic), "bic": _num(f.bic),
-            "cost": _num(f.cost), "k": f.k, "rms_per_output": dict(res.rms), "fit_percent": dict(res.fit_percent),
+    return {"rms": finite_or_none(f.rms), "validation_rms": finite_or_none(f.validation_rms), "aic": finite_or_none(f.aic), "bic": finite_or_none(f.bic),
+            "cost": finite_or_none(f.cost), "k": f.k, "rms_per_output": dict(res.rms), "fit_percent": dict(res.fit_percent),
             "validation_rms_per_output": [m["rms"] for m in val],
             "validation_fit_percent": [m["fit_percent"] for m in val]}
-
-
-def _num(x: float) -> float | None:
-    return float(x) if x is not None and math.isfinite(x) else None
 
 
 def candidates(effects: Sequence[Effect], current: Diagram, scales: Scales, done: set) -> list[Candidate]:
@@ -440,10 +437,10 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                 entry = {"round": r, "rank": rank + 1, **s.as_dict()}
                 f = achieved.get(id(s))
                 if f is not None:
-                    entry.update({"refitted": True, "achieved_cost": _num(f.cost),
-                                  "achieved_decrease": _num(current.cost - f.cost), "start": f.start,
-                                  "validation_rms_after": _num(f.validation_rms),
-                                  settings.criterion + "_after": _num(f.criterion(settings.criterion))})
+                    entry.update({"refitted": True, "achieved_cost": finite_or_none(f.cost),
+                                  "achieved_decrease": finite_or_none(current.cost - f.cost), "start": f.start,
+                                  "validation_rms_after": finite_or_none(f.validation_rms),
+                                  settings.criterion + "_after": finite_or_none(f.criterion(settings.criterion))})
                 candidates_out.append(entry)
             if not best:
                 stop_reason = "nothing_significant"
@@ -577,13 +574,13 @@ def _round_entry(r: int, s: Score, before: Fitted, after: Fitted | None, accepte
     return {
         "round": r, "effect": c.name, "at": c.at, "option": s.as_dict()["option"], "label": c.label,
         "accepted": accepted, "reason": reason, "start": a.start if a else None,
-        "score": _num(s.score), "predicted_decrease": _num(s.score),
-        "achieved_decrease": _num(before.cost - a.cost) if a else None,
-        "rms_before": _num(before.rms), "rms_after": _num(a.rms) if a else None,
-        "validation_rms_before": _num(before.validation_rms),
-        "validation_rms_after": _num(a.validation_rms) if a else None,
-        "aic_before": _num(before.aic), "aic_after": _num(a.aic) if a else None,
-        "bic_before": _num(before.bic), "bic_after": _num(a.bic) if a else None,
+        "score": finite_or_none(s.score), "predicted_decrease": finite_or_none(s.score),
+        "achieved_decrease": finite_or_none(before.cost - a.cost) if a else None,
+        "rms_before": finite_or_none(before.rms), "rms_after": finite_or_none(a.rms) if a else None,
+        "validation_rms_before": finite_or_none(before.validation_rms),
+        "validation_rms_after": finite_or_none(a.validation_rms) if a else None,
+        "aic_before": finite_or_none(before.aic), "aic_after": finite_or_none(a.aic) if a else None,
+        "bic_before": finite_or_none(before.bic), "bic_after": finite_or_none(a.bic) if a else None,
         "before": _summary(before), "after": _summary(a) if a else None,
         "parameters": (a.identification.values if a else None),
     }

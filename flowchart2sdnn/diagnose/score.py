@@ -51,6 +51,7 @@ from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify.problem import Problem, build_problem
+from ..strictjson import finite_or_none
 from .effects import Effect
 from .graph import Place
 
@@ -136,9 +137,9 @@ class Score:
     def as_dict(self) -> dict:
         c = self.candidate
         return {"effect": c.name, "at": c.at, "option": _jsonable(c.option), "label": c.label,
-                "score": _finite(self.score) if self.scored else None,
-                "predicted_cost": _finite(self.predicted_cost), "cost_patched": _finite(self.cost),
-                "dof": self.dof, "statistic": _finite(self.statistic), "p_value": _finite(self.p_value),
+                "score": finite_or_none(self.score) if self.scored else None,
+                "predicted_cost": finite_or_none(self.predicted_cost), "cost_patched": finite_or_none(self.cost),
+                "dof": self.dof, "statistic": finite_or_none(self.statistic), "p_value": finite_or_none(self.p_value),
                 "error": self.error}
 
 
@@ -161,15 +162,11 @@ class Screen:
         return out
 
 
-def _finite(x) -> float | None:
-    return float(x) if x is not None and math.isfinite(x) else None
-
-
 def _jsonable(option):
     if option is None or isinstance(option, (bool, int, str)):
         return option
     if isinstance(option, float):
-        return _finite(option)
+        return finite_or_none(option)
     return str(option)
 
 

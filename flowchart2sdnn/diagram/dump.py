@@ -15,7 +15,7 @@ from .model import Block, Diagram, NonlinearWeights
 __all__ = ["dump_diagram", "with_values"]
 
 
-def _num(x: float) -> float | int:
+def _yaml_number(x: float) -> float | int:
     return int(x) if float(x).is_integer() and abs(x) < 1e15 else float(x)
 
 
@@ -25,21 +25,21 @@ def _block_dict(b: Block) -> dict:
         terms = [str(t) for t in b.inputs]
         d["in"] = terms if b.kind == "sum" else terms[0]
     if b.k is not None:
-        d["k"] = _num(b.k.evaluate({})) if b.k.is_constant else str(b.k)
+        d["k"] = _yaml_number(b.k.evaluate({})) if b.k.is_constant else str(b.k)
     if b.kind == "integrator" and b.init not in (None, 0.0):
-        d["init"] = b.init if b.init == "data" else _num(b.init)
+        d["init"] = b.init if b.init == "data" else _yaml_number(b.init)
     if b.kind == "delay" and b.n not in (None, 1):
         d["n"] = b.n
     if b.kind == "function":
         d["f"] = b.f
         if b.eps is not None:
-            d["eps"] = _num(b.eps)
+            d["eps"] = _yaml_number(b.eps)
     if b.kind == "nonlinear":
         d["neurons"] = b.neurons
         if b.bias:
             d["bias"] = True
         if b.init_range not in (None, (-0.5, 0.5)):
-            d["init_range"] = [_num(x) for x in b.init_range]
+            d["init_range"] = [_yaml_number(x) for x in b.init_range]
         if b.fixed:
             d["fixed"] = True
         if b.weights is not None:
@@ -59,7 +59,7 @@ def dump_diagram(diagram: Diagram, identified: Mapping | None = None) -> str:
     doc: dict = {"sdnn": 1, "name": diagram.name}
     if diagram.description:
         doc["description"] = diagram.description
-    doc["sample_time"] = _num(diagram.sample_time)
+    doc["sample_time"] = _yaml_number(diagram.sample_time)
 
     def signals(items):
         out = {}
@@ -76,11 +76,11 @@ def dump_diagram(diagram: Diagram, identified: Mapping | None = None) -> str:
     doc["outputs"] = signals(diagram.outputs)
     params = {}
     for p in diagram.parameters:
-        spec: dict = {"init": _num(p.init)}
+        spec: dict = {"init": _yaml_number(p.init)}
         for key in ("unit", "min", "max"):
             value = getattr(p, key)
             if value is not None:
-                spec[key] = _num(value) if isinstance(value, float) else value
+                spec[key] = _yaml_number(value) if isinstance(value, float) else value
         if p.fixed:
             spec["fixed"] = True
         if p.description:

@@ -75,7 +75,7 @@ def _is_number(x) -> bool:
     return isinstance(x, (int, float)) and not isinstance(x, bool)
 
 
-def _finite(x) -> bool:
+def _finite_number(x) -> bool:
     """A number that is a finite float; a YAML integer of 400 digits is not (math.isfinite would raise)."""
     if not _is_number(x):
         return False
@@ -143,7 +143,7 @@ class _Validator:
         if "sample_time" not in data:
             self.error("CHART002", "missing 'sample_time' (seconds, e.g. 0.001)", ())
             ts = 1.0
-        elif not _is_number(ts) or not _finite(ts) or ts <= 0 or ts > 1e6:
+        elif not _is_number(ts) or not _finite_number(ts) or ts <= 0 or ts > 1e6:
             self.error("CHART004", f"'sample_time' must be a positive number of seconds, found {_show(ts)}", ("sample_time",))
             ts = 1.0
         inputs = self.signals(data.get("inputs"), "inputs")
@@ -225,7 +225,7 @@ class _Validator:
                 self.error("CHART002", f"missing '{key}' (a number)", path, block)
             return default
         value = spec[key]
-        if not _is_number(value) or not _finite(value):
+        if not _is_number(value) or not _finite_number(value):
             self.error("CHART004", f"'{key}' must be a finite number, found {_show(value)}", path + (key,), block)
             return default
         return float(value)
@@ -341,7 +341,7 @@ class _Validator:
             init = spec.get("init", 0.0)
             if init == "data":
                 fields["init"] = "data"
-            elif _finite(init):
+            elif _finite_number(init):
                 fields["init"] = float(init)
             else:
                 self.error("CHART004", f"'init' must be a number or 'data', found {_show(init)}", path + ("init",), name)
@@ -367,7 +367,7 @@ class _Validator:
         fields["fixed"] = self.flag(spec, "fixed", path, name)
         rng = spec.get("init_range", [-0.5, 0.5])
         if (
-            not isinstance(rng, list) or len(rng) != 2 or not all(_finite(x) for x in rng)
+            not isinstance(rng, list) or len(rng) != 2 or not all(_finite_number(x) for x in rng)
             or not rng[0] < rng[1]
         ):
             self.error("CHART004", f"'init_range' must be [low, high] with low < high, found {_show(rng)}",
@@ -388,7 +388,7 @@ class _Validator:
                 continue
             vec = weights[key]
             if (not isinstance(vec, list) or len(vec) != neurons
-                    or not all(_finite(x) for x in vec)):
+                    or not all(_finite_number(x) for x in vec)):
                 self.error("CHART004", f"weights '{key}' must be a list of {neurons} numbers", wpath + (key,), name)
                 return
             vectors[key] = tuple(float(x) for x in vec)
@@ -443,7 +443,7 @@ class _Validator:
             self.error("CHART004", f"'{key}' must be a number or an expression, found {_kind(value)}",
                        path + (key,), name)
             return None
-        if _is_number(value) and not _finite(value):  # parse_expr's message would print a 400-digit number
+        if _is_number(value) and not _finite_number(value):  # parse_expr's message would print a 400-digit number
             self.error("CHART007", f"'{key}' must be a finite number, found {_show(value)}", path + (key,), name)
             return None
         try:

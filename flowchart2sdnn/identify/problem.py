@@ -16,6 +16,7 @@ from ..network.alignment import fitted_rows, network_inputs, run_aligned
 from ..network.model import Network
 from ..network.runtime import CompiledNetwork
 from ..network.stability import rest_radii
+from ..strictjson import finite_or_none
 
 __all__ = ["Problem", "Segment", "build_problem", "metrics", "combined_metrics", "data_init", "required_columns", "CHATTER_LIMIT"]
 
@@ -209,23 +210,17 @@ def metrics(compiled: CompiledNetwork, x: np.ndarray, data: Dataset, alignment: 
     start = max(score_from, fitted_rows(data.n_rows, alignment).start)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         e = y[start:] - yhat[start:]
-        out = {"rows": int(len(e)), "cost": _finite(0.5 * np.sum(e**2)), "rms": {}, "fit_percent": {}}
+        out = {"rows": int(len(e)), "cost": finite_or_none(0.5 * np.sum(e**2)), "rms": {}, "fit_percent": {}}
         for i, name in enumerate(compiled.output_names):
             ei = e[:, i]
             yi = y[start:, i]
             if len(ei) == 0:
                 out["rms"][name] = out["fit_percent"][name] = None
                 continue
-            out["rms"][name] = _finite(np.sqrt(np.mean(ei**2)))
+            out["rms"][name] = finite_or_none(np.sqrt(np.mean(ei**2)))
             spread = np.linalg.norm(yi - yi.mean())
-            out["fit_percent"][name] = _finite(100.0 * (1.0 - np.linalg.norm(ei) / spread)) if spread > 0 else None
+            out["fit_percent"][name] = finite_or_none(100.0 * (1.0 - np.linalg.norm(ei) / spread)) if spread > 0 else None
     return out
-
-
-def _finite(value) -> float | None:
-    """A metric as a float, or None when it is NaN or infinite (a diverged free run): never NaN in JSON."""
-    value = float(value)
-    return value if np.isfinite(value) else None
 
 
 def combined_metrics(per_record: list[dict], problem: Problem, x: np.ndarray, records: list[Dataset],
