@@ -1,7 +1,7 @@
 """Quasi-online LM on the paper's run: 100 s at 1 kHz, Q = 25 000 (section 3.1, 6).
 
 The default window mode runs one exact LM iteration on the last Q samples every 500 samples (a window
-simulation per trial, an RTRL pass over the window per accepted iteration; flowchart2sdnn/network/online_kernel.py).
+simulation per trial, an RTRL pass over the window per accepted iteration; flowchart2sdnn/identify/online_kernel.py).
 Measures the real-time factor (record length / wall time; target >= 20x), the GFLOP/s of the per-sample part
 against the flop count below (that of the former trial mode, ``OnlineOptions(tries=0)``, one LM step per sample;
 the window mode's window passes come on top and are not counted), and the peak memory (tracemalloc: every numpy allocation of the run) for Q = 5000 / 25 000 and
