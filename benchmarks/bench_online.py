@@ -50,7 +50,7 @@ def flops_per_sample(cn: CompiledNetwork) -> float:
     f = cn._flat
     p, n, c = cn.n_theta, f.n_neurons, f.n_connections
     c_n = int((f.conn_kind == 0).sum())
-    d = int(cn._dtheta.shape[0])
+    d = cn.weights.n_slots
     return 2 * (2 * p * c_n + 2 * d + p * n) + 4 * c + 2 * p * (p + 1) + 4 * p * p + p**3 / 3
 
 

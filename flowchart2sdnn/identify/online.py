@@ -261,7 +261,7 @@ class OnlineRun:
                                   compiled._history(init), flat.ring, opt.window, compiled.n_outputs,
                                   opt.average, opt.mu0, replay=opt.tries > 0)
         self._net = (flat.conn_ptr, flat.conn_kind, flat.conn_src, flat.conn_delay, flat.transfer,
-                     compiled._dptr, compiled._dtheta, flat.output_index)
+                     compiled.weights.conn_slots, compiled.weights.slot_theta, flat.output_index)
         self._bnd = (_bound_codes(self.bounds), np.array(self.bounds.lower, dtype=float),
                      np.array(self.bounds.upper, dtype=float))
         self._fopt = np.array([opt.mu_inc, opt.mu_dec, opt.mu_min, opt.mu_max, opt.tau], dtype=float)
