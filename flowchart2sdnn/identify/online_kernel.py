@@ -28,9 +28,9 @@ accepted step only moved to the minimum of that stale model, and none of the fou
 **Trial mode** (``tries = 0``, the previous algorithm, kept for comparison). Two copies of the network run free
 alongside the record:
 
-* the *model*, with the accepted internal parameters u: an RTRL step per sample (as
-  :func:`.kernels.jacobian_kernel`) gives its output and ``S(t) = d a(t) / d x``; the window row is
-  ``J(t) = S_out(t) * dx/du`` with the a-priori error ``e(t) = y(t) - yhat(t)``;
+* the *model*, with the accepted internal parameters u: an RTRL step per sample (the offline Jacobian's
+  :func:`flowchart2sdnn.network.kernels.rtrl_step`) gives its output and ``S(t) = d a(t) / d x``; the window
+  row is ``J(t) = S_out(t) * dx/du`` with the a-priori error ``e(t) = y(t) - yhat(t)``;
 * the *trial*, with ``u_trial = u + du``, the LM step from u computed on the current window
   (``(A + mu I) du = g``, Cholesky, a larger damping when rounding makes the matrix indefinite), recomputed
   every ``every`` samples as the window slides. The trial is only simulated.
@@ -62,7 +62,11 @@ non-finite model output adopts the trial's parameters and state when they are fi
 the history with zero sensitivities; the sample's row is skipped and the event recorded. Nothing non-finite
 ever enters the window.
 
-Float state ``fs`` and integer state ``its``: see the ``F_*`` and ``I_*`` constants.
+Layout: this module holds the state, the per-sample loop and the trial mode; :mod:`.online_window` the window
+numerics (FIFO sums, the damped step, the window mode's iteration). Both run the network with the offline
+kernels' steps (:mod:`flowchart2sdnn.network.kernels`) and move mu by the offline trainer's schedule
+(:mod:`flowchart2sdnn.fit.damping`). Float state ``fs`` and integer state ``its``: see the ``F_*`` and ``I_*``
+constants of :mod:`.online_window`.
 """
 
 from __future__ import annotations

@@ -15,6 +15,7 @@ from __future__ import annotations
 import math
 
 import numba
+import numpy as np
 
 from ..fit import damping
 from ..network.kernels import rtrl_step, simulate_step
@@ -230,37 +231,61 @@ def scaled_mu(A, mu0, tau, mu_max):
 
 # ------------------------------------------------------------------------------------------ window mode
 @numba.njit(cache=True)
-def window_sim(inputs, targets, net, conn, win_state, win_time, its, a_tr, slot_of, e_tr, tr_state,
-               limit=math.inf):
-    """Simulate the window's samples again with the connection values `conn`: a free run from the stored state
-    before the oldest row (a gap left by a skipped row restarts from that row's stored state).
+def _replay(inputs, targets, net, conn, dval, dxdu, a, s, s_blk, with_sens, win_state, win_time, its, states,
+            e_out, c_out, J_out, limit, slot_of, dn, dn2):
+    """Run the window's samples again, oldest first, from the stored state before the oldest row (a gap left
+    by a skipped row restarts from that row's stored state, sensitivities from zero).
 
-    Writes each row's error to `e_tr` and the state before its sample to `tr_state` (indexed like the rows);
-    `a_tr` ends as the state after the newest sample. Returns 1/2 the sum of the squared errors, inf when the
-    run is not finite or as soon as that cost exceeds `limit` (a refused trial need not be run to its end)."""
+    Per row q: the state before its sample into ``states[q]``, its error into ``e_out[q]``; with `with_sens`
+    (RTRL) also into ``c_out[q]`` and its Jacobian row into ``J_out[q]``. Returns 1/2 the sum of the squared
+    errors; without `with_sens`, inf once that exceeds `limit` or is not finite."""
     window = win_time.shape[0]
     output_index = net[7]
     count = its[I_COUNT]
     head = its[I_HEAD]
-    ring = a_tr.shape[0]
+    ring = a.shape[0]
     cost = 0.0
     prev = -2
     for i in range(count):
         q = (head - count + i + window) % window
         tq = win_time[q]
         if tq != prev + 1:
-            a_tr[:, :] = win_state[q]
-        tr_state[q] = a_tr
-        simulate(tq, inputs, net, conn, a_tr, slot_of)
+            a[:, :] = win_state[q]
+            if with_sens:
+                s[:, :, :] = 0.0
+        states[q] = a
+        if with_sens:
+            rtrl(tq, inputs, net, conn, dval, a, s, s_blk, False, slot_of, dn, dn2)
+        else:
+            simulate(tq, inputs, net, conn, a, slot_of)
         slot = tq % ring
         for o in range(output_index.shape[0]):
-            err = targets[tq, o] - a_tr[slot, output_index[o]]
-            e_tr[q, o] = err
+            r = output_index[o]
+            err = targets[tq, o] - a[slot, r]
+            e_out[q, o] = err
             cost += err * err
-        if not 0.5 * cost <= limit or cost > 1e300:
+            if with_sens:
+                c_out[q, o] = err
+                for p in range(dxdu.shape[0]):
+                    J_out[q, o, p] = s[slot, r, p] * dxdu[p]
+        if not with_sens and (not 0.5 * cost <= limit or cost > 1e300):
             return math.inf
         prev = tq
     return 0.5 * cost
+
+
+@numba.njit(cache=True)
+def window_sim(inputs, targets, net, conn, win_state, win_time, its, a_tr, slot_of, e_tr, tr_state,
+               limit=math.inf):
+    """Simulate the window's samples again with the connection values `conn` (a trial), see :func:`_replay`.
+
+    Writes each row's error to `e_tr` and the state before its sample to `tr_state` (indexed like the rows);
+    `a_tr` ends as the state after the newest sample. Returns 1/2 the sum of the squared errors, inf when the
+    run is not finite or as soon as that cost exceeds `limit` (a refused trial need not be run to its end)."""
+    no_s = np.empty((1, 1, 1))
+    no_p = np.empty(0)
+    return _replay(inputs, targets, net, conn, no_p, no_p, a_tr, no_s, no_s, False, win_state, win_time, its,
+                   tr_state, e_tr, e_tr, no_s, limit, slot_of, no_p, no_p)
 
 
 @numba.njit(cache=True)
@@ -270,31 +295,10 @@ def window_rtrl(inputs, targets, net, stm, wnd, win_state, win_time, its, slot_o
 
     The model ends with the state and sensitivities after the newest sample; the window sums are not touched
     (call :func:`resync`)."""
-    u, dxdu, conn_val, dval, a_buf, s_buf, s_blk = stm[0], stm[2], stm[3], stm[4], stm[5], stm[6], stm[7]
+    dxdu, conn_val, dval, a_buf, s_buf, s_blk = stm[2], stm[3], stm[4], stm[5], stm[6], stm[7]
     win_J, win_c, win_e = wnd[0], wnd[1], wnd[2]
-    window = win_time.shape[0]
-    output_index = net[7]
-    ring = a_buf.shape[0]
-    count = its[I_COUNT]
-    head = its[I_HEAD]
-    prev = -2
-    for i in range(count):
-        q = (head - count + i + window) % window
-        tq = win_time[q]
-        if tq != prev + 1:
-            a_buf[:, :] = win_state[q]
-            s_buf[:, :, :] = 0.0
-        win_state[q] = a_buf
-        rtrl(tq, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, False, slot_of, dn, dn2)
-        slot = tq % ring
-        for o in range(output_index.shape[0]):
-            r = output_index[o]
-            err = targets[tq, o] - a_buf[slot, r]
-            win_e[q, o] = err
-            win_c[q, o] = err
-            for p in range(u.shape[0]):
-                win_J[q, o, p] = s_buf[slot, r, p] * dxdu[p]
-        prev = tq
+    _replay(inputs, targets, net, conn_val, dval, dxdu, a_buf, s_buf, s_blk, True, win_state, win_time, its,
+            win_state, win_e, win_c, win_J, math.inf, slot_of, dn, dn2)
 
 
 @numba.njit(cache=True)
