@@ -7,7 +7,8 @@ one). The network steps are those of the offline kernels (:func:`flowchart2sdnn.
 :func:`~flowchart2sdnn.network.kernels.simulate_step`), the damping schedule that of the offline trainer
 (:mod:`flowchart2sdnn.fit.damping`), compiled here.
 
-Float state ``fs`` and integer state ``its``: see the ``F_*`` and ``I_*`` constants.
+Layer: identify/, so it may build on both network/ (the steps) and fit/ (the schedule), which know nothing of
+each other. Float state ``fs`` and integer state ``its``: see the ``F_*`` and ``I_*`` constants.
 """
 
 from __future__ import annotations
