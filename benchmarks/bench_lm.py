@@ -80,7 +80,7 @@ def main() -> None:
 
     f = cn._flat
     p, n, c = cn.n_theta, f.n_neurons, f.n_connections
-    c_n, d = int((f.conn_kind == 0).sum()), int(cn._dtheta.shape[0])
+    c_n, d = int((f.conn_kind == 0).sum()), cn.weights.n_slots
     flops_jac = q * (2 * p * c_n + 2 * d + p * n + 2 * c)
     flops = ours.njev * (flops_jac + 2 * q * p * p + 2 * q * p) + n_trials * (2 * q * c + p**3 / 3 + 2 * p * p)
 

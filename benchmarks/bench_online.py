@@ -1,7 +1,7 @@
 """Quasi-online LM on the paper's run: 100 s at 1 kHz, Q = 25 000 (section 3.1, 6).
 
 The default window mode runs one exact LM iteration on the last Q samples every 500 samples (a window
-simulation per trial, an RTRL pass over the window per accepted iteration; flowchart2sdnn/network/online_kernel.py).
+simulation per trial, an RTRL pass over the window per accepted iteration; flowchart2sdnn/identify/online_kernel.py).
 Measures the real-time factor (record length / wall time; target >= 20x), the GFLOP/s of the per-sample part
 against the flop count below (that of the former trial mode, ``OnlineOptions(tries=0)``, one LM step per sample;
 the window mode's window passes come on top and are not counted), and the peak memory (tracemalloc: every numpy allocation of the run) for Q = 5000 / 25 000 and
@@ -50,7 +50,7 @@ def flops_per_sample(cn: CompiledNetwork) -> float:
     f = cn._flat
     p, n, c = cn.n_theta, f.n_neurons, f.n_connections
     c_n = int((f.conn_kind == 0).sum())
-    d = int(cn._dtheta.shape[0])
+    d = cn.weights.n_slots
     return 2 * (2 * p * c_n + 2 * d + p * n) + 4 * c + 2 * p * (p + 1) + 4 * p * p + p**3 / 3
 
 

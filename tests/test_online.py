@@ -20,8 +20,8 @@ from flowchart2sdnn.compiler import compile_file
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.fit.transforms import Bounds
+from flowchart2sdnn.identify import online_kernel as ok
 from flowchart2sdnn.identify.online import OnlineOptions, OnlineRun, quasi_online
-from flowchart2sdnn.network import online_kernel as ok
 from flowchart2sdnn.network.randomnet import random_gdnn
 from flowchart2sdnn.network.runtime import CompiledNetwork
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite

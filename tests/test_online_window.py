@@ -1,4 +1,4 @@
-"""Quasi-online LM, window mode (network/online_kernel.py module docstring): each iteration by hand.
+"""Quasi-online LM, window mode (identify/online_kernel.py module docstring): each iteration by hand.
 
 Oracles: the hand-derived recursion y(t) = w y(t-1) + k u(t) and its sensitivities, the LM formula and the
 trainlm accept test in numpy; the scaled first damping rule of fit/lm.py (LMOptions.tau) by hand; the
@@ -11,8 +11,8 @@ import numpy as np
 import pytest
 from feedback_neuron import feedback_neuron, hand_run
 
+from flowchart2sdnn.identify import online_kernel as ok
 from flowchart2sdnn.identify.online import OnlineOptions, OnlineRun, quasi_online
-from flowchart2sdnn.network import online_kernel as ok
 from flowchart2sdnn.network.randomnet import random_gdnn
 from flowchart2sdnn.network.runtime import CompiledNetwork
 

@@ -8,7 +8,7 @@ The trainer is generic: it sees a callback ``fun(x) -> (e, J)`` returning the re
     (J_u^T J_u + mu I) du = J_u^T e,      J_u = J * dx/du,      cost E = 1/2 e^T e.
 
 A trial step is accepted only if it lowers the cost (then ``mu *= mu_dec``); otherwise ``mu *= mu_inc``
-and the step is recomputed.  A trial whose simulation diverges (``fun`` returns None, non-finite
+and the step is recomputed (the schedule of :mod:`.damping`, shared with the quasi-online kernel).  A trial whose simulation diverges (``fun`` returns None, non-finite
 values, or raises FloatingPointError/OverflowError) or that ``guard`` refuses is rejected the same way,
 so the result never holds NaN.
 """
@@ -22,6 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq
 
+from .damping import first_mu, mu_accepted, mu_refused
 from .transforms import Bounds
 
 __all__ = ["LMOptions", "LMResult", "levenberg_marquardt", "STATUS_MESSAGES", "CONVERGED_STATUSES"]
@@ -353,7 +354,7 @@ def levenberg_marquardt(
             )
             if new_point is not None:
                 rel_decrease = (point.cost - new_point.cost) / point.cost if point.cost > 0 else 0.0
-                mu = max(mu * opt.mu_dec, opt.mu_min)
+                mu = mu_accepted(mu, opt.mu_dec, opt.mu_min)
                 state = (new_point, mu, costs + (new_point.cost,), mus + (mu,))
                 if tiny:
                     status = "small_step"
@@ -405,9 +406,7 @@ def _first_mu(point: _Point, bounds: Bounds, opt: LMOptions) -> float:
     Ju = point.J * bounds.dx_du(point.u)
     with np.errstate(over="ignore", invalid="ignore"):
         peak = float(np.max(np.einsum("ij,ij->j", Ju, Ju), initial=0.0))
-    if not math.isfinite(peak):
-        return opt.mu_max
-    return float(min(opt.mu_max, max(opt.mu0, opt.tau * peak)))
+    return float(first_mu(peak, opt.mu0, opt.tau, opt.mu_max))
 
 
 def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float, opt: LMOptions, counters):
@@ -440,7 +439,7 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
             return None, trial, mu, tiny
         if tiny:  # the cost no longer decreases along steps at rounding level: converged
             return "small_step", None, mu, tiny
-        mu *= opt.mu_inc
+        mu = mu_refused(mu, opt.mu_inc, math.inf)  # no cap: past mu_max the run stops
         if mu > opt.mu_max:
             return "mu_max", None, mu, tiny
     return "max_mu_tries", None, mu, False

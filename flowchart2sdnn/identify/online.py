@@ -2,7 +2,7 @@
 
 The model runs free alongside the record with the accepted parameters; RTRL gives each new sample's
 Jacobian row; a FIFO window keeps the last Q rows and the running sums of the normal equations. Two ways to
-step (the numba kernel :mod:`flowchart2sdnn.network.online_kernel` states both and why):
+step (the numba kernel :mod:`.online_kernel` states both and why):
 
 * window mode (``tries >= 1``, default): every ``block`` samples one trainlm iteration on the window, each
   trial judged by simulating the window's samples again at it, an accepted trial relinearising the window
@@ -29,8 +29,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..fit.transforms import Bounds
-from ..network import online_kernel as ok
 from ..network.runtime import CompiledNetwork
+from . import online_kernel as ok
 
 __all__ = ["OnlineOptions", "OnlineResult", "OnlineRun", "OnlineStart", "quasi_online", "STATUS_MESSAGES"]
 
@@ -261,7 +261,7 @@ class OnlineRun:
                                   compiled._history(init), flat.ring, opt.window, compiled.n_outputs,
                                   opt.average, opt.mu0, replay=opt.tries > 0)
         self._net = (flat.conn_ptr, flat.conn_kind, flat.conn_src, flat.conn_delay, flat.transfer,
-                     compiled._dptr, compiled._dtheta, flat.output_index)
+                     compiled.weights.conn_slots, compiled.weights.slot_theta, flat.output_index)
         self._bnd = (_bound_codes(self.bounds), np.array(self.bounds.lower, dtype=float),
                      np.array(self.bounds.upper, dtype=float))
         self._fopt = np.array([opt.mu_inc, opt.mu_dec, opt.mu_min, opt.mu_max, opt.tau], dtype=float)

@@ -25,7 +25,7 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["simulate_kernel", "jacobian_kernel"]
+__all__ = ["simulate_kernel", "jacobian_kernel", "simulate_step", "rtrl_step"]
 
 # Reassociation and fused multiply-add let LLVM vectorize the loops over theta. No "nnan"/"ninf": a diverging
 # simulation must still come back as NaN/inf for the trainer to reject it.
@@ -59,6 +59,89 @@ def _slope(code, n, a):
     return -math.sin(n)
 
 
+@numba.njit(cache=True, inline="always")
+def simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, a_buf, slot_of):
+    """Eq. (1)-(2) at time t: every neuron's output into slot ``t % ring`` of the ring buffer `a_buf`.
+
+    `slot_of` (ring,) int64 is scratch. Inlined into each caller at numba-IR level, so it is lowered with the
+    caller's fastmath flags: the offline kernels keep theirs, the quasi-online kernel its strict IEEE order.
+    """
+    ring = a_buf.shape[0]
+    slot = t % ring
+    for d in range(ring):  # slot of a(t - d), refreshed each step: no modulo per connection
+        slot_of[d] = (t - d + ring) % ring
+    for k in range(transfer.shape[0]):
+        n = 0.0
+        for c in range(conn_ptr[k], conn_ptr[k + 1]):
+            kind = conn_kind[c]
+            d = conn_delay[c]
+            if kind == 0:
+                x = a_buf[slot_of[d], conn_src[c]]
+            elif kind == 1:
+                x = inputs[max(t - d, 0), conn_src[c]]
+            else:
+                x = 1.0
+            n += conn_val[c] * x
+        a_buf[slot, k] = _transfer(transfer[k], n)
+
+
+@numba.njit(cache=True, inline="always")
+def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
+              a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2):
+    """:func:`simulate_step` and the RTRL recursion of the module docstring: ``S(t)`` into slot ``t % ring``
+    of `s_buf` (ring, N, P).
+
+    With `with_blk`, a second set of sensitivities `s_blk` follows the same recursion (the quasi-online
+    kernel's trial mode restarts it at zero at each block start); otherwise `s_blk` is not touched.
+    `slot_of` (ring,) int64, `dn` and `dn2` (P,) float64 are scratch.
+    """
+    ring = a_buf.shape[0]
+    n_theta = s_buf.shape[2]
+    slot = t % ring
+    for d in range(ring):
+        slot_of[d] = (t - d + ring) % ring
+    for k in range(transfer.shape[0]):
+        n = 0.0
+        for p in range(n_theta):
+            dn[p] = 0.0
+        if with_blk:
+            for p in range(n_theta):
+                dn2[p] = 0.0
+        for c in range(conn_ptr[k], conn_ptr[k + 1]):
+            kind = conn_kind[c]
+            d = conn_delay[c]
+            w = conn_val[c]
+            if kind == 0:
+                src_slot = slot_of[d]
+                src = conn_src[c]
+                x = a_buf[src_slot, src]
+                # before t = 0 the source is history, whose sensitivity is zero
+                if t - d >= 0 and w != 0.0:
+                    for p in range(n_theta):
+                        dn[p] += w * s_buf[src_slot, src, p]
+                    if with_blk:
+                        for p in range(n_theta):
+                            dn2[p] += w * s_blk[src_slot, src, p]
+            elif kind == 1:
+                x = inputs[max(t - d, 0), conn_src[c]]
+            else:
+                x = 1.0
+            n += w * x
+            for e in range(dptr[c], dptr[c + 1]):
+                dn[dtheta[e]] += x * dval[e]
+                if with_blk:
+                    dn2[dtheta[e]] += x * dval[e]
+        code = transfer[k]
+        a = _transfer(code, n)
+        a_buf[slot, k] = a
+        g = _slope(code, n, a)
+        for p in range(n_theta):
+            s_buf[slot, k, p] = g * dn[p]
+        if with_blk:
+            for p in range(n_theta):
+                s_blk[slot, k, p] = g * dn2[p]
+
+
 @numba.njit(cache=True, fastmath=_FAST)
 def simulate_kernel(
     inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, history, ring, record
@@ -75,26 +158,10 @@ def simulate_kernel(
     for s in range(ring):
         for k in range(n_neurons):
             a_buf[s, k] = history[k]
-    slot_of = np.empty(
-        ring, dtype=np.int64
-    )  # slot of a(t - d), refreshed each step: no modulo per connection
+    slot_of = np.empty(ring, dtype=np.int64)
     for t in range(n_steps):
+        simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, a_buf, slot_of)
         slot = t % ring
-        for d in range(ring):
-            slot_of[d] = (t - d + ring) % ring
-        for k in range(n_neurons):
-            n = 0.0
-            for c in range(conn_ptr[k], conn_ptr[k + 1]):
-                kind = conn_kind[c]
-                d = conn_delay[c]
-                if kind == 0:
-                    x = a_buf[slot_of[d], conn_src[c]]
-                elif kind == 1:
-                    x = inputs[max(t - d, 0), conn_src[c]]
-                else:
-                    x = 1.0
-                n += conn_val[c] * x
-            a_buf[slot, k] = _transfer(transfer[k], n)
         for o in range(record.shape[0]):
             out[t, o] = a_buf[slot, record[o]]
     return out
@@ -139,42 +206,11 @@ def jacobian_kernel(
             a_buf[s, k] = history[k]
     s_buf = np.zeros((ring, n_neurons, n_theta))
     dn = np.empty(n_theta)
-    slot_of = np.empty(
-        ring, dtype=np.int64
-    )  # slot of a(t - d), refreshed each step: no modulo per connection
+    slot_of = np.empty(ring, dtype=np.int64)
     for t in range(n_steps):
+        rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
+                  a_buf, s_buf, s_buf, False, slot_of, dn, dn)
         slot = t % ring
-        for d in range(ring):
-            slot_of[d] = (t - d + ring) % ring
-        for k in range(n_neurons):
-            n = 0.0
-            for p in range(n_theta):
-                dn[p] = 0.0
-            for c in range(conn_ptr[k], conn_ptr[k + 1]):
-                kind = conn_kind[c]
-                d = conn_delay[c]
-                w = conn_val[c]
-                if kind == 0:
-                    src_slot = slot_of[d]
-                    src = conn_src[c]
-                    x = a_buf[src_slot, src]
-                    # before t = 0 the source is history, whose sensitivity is zero
-                    if t - d >= 0 and w != 0.0:
-                        for p in range(n_theta):
-                            dn[p] += w * s_buf[src_slot, src, p]
-                elif kind == 1:
-                    x = inputs[max(t - d, 0), conn_src[c]]
-                else:
-                    x = 1.0
-                n += w * x
-                for e in range(dptr[c], dptr[c + 1]):
-                    dn[dtheta[e]] += x * dval[e]
-            code = transfer[k]
-            a = _transfer(code, n)
-            a_buf[slot, k] = a
-            g = _slope(code, n, a)
-            for p in range(n_theta):
-                s_buf[slot, k, p] = g * dn[p]
         for o in range(n_rec):
             r = record[o]
             y[t, o] = a_buf[slot, r]

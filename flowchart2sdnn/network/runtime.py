@@ -8,21 +8,71 @@ theta, the vector the trainer moves, holds the free quantities: by default the n
     dw_j/df = coef_j(parameters)                                   for the free weight f of w_j.
 
 The symbolic derivatives are taken once here; each call evaluates them into a sparse (connection, theta,
-value) list that the kernel of :mod:`.kernels` consumes.
+value) list that the kernel of :mod:`.kernels` consumes. :attr:`CompiledNetwork.weights` publishes these
+tables (:class:`WeightTable`) for other evaluators of the weights (:mod:`.weight_program`).
 """
 
 from __future__ import annotations
 
 from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
 
 import numpy as np
 
-from ..expr import parse_expr
+from ..expr import Expr, parse_expr
 from .flat import FlatNetwork, flatten, signal_names
 from .kernels import jacobian_kernel, simulate_kernel
 from .model import Network
 
-__all__ = ["CompiledNetwork"]
+__all__ = ["CompiledNetwork", "WeightTable"]
+
+
+def _frozen(a, dtype) -> np.ndarray:
+    a = np.array(a, dtype=dtype)
+    a.setflags(write=False)
+    return a
+
+
+@dataclass(frozen=True, eq=False)
+class WeightTable:
+    """How the connection values and their theta-derivatives follow from theta (read-only arrays).
+
+    With W weights (``net.weights`` order), T derivative terms, D nonzero (connection, theta) slots and C
+    connections:
+
+    coefs : tuple of Expr            the distinct coef expressions
+    weight_coef : (W,) int64         the coef of each weight, an index into `coefs`
+    weight_free : tuple of str|None  the free weight each weight is multiplied by (None: none)
+    weight_conn : (W,) int64         the connection each weight adds to (several weights may share one)
+    term_expr : tuple of Expr        each term's d(coef)/d(theta) (a parameter) or coef (a free weight)
+    term_free : tuple of str|None    the free weight the term is multiplied by (None: none)
+    term_slot : (T,) int64           the slot each term adds to
+    slot_theta : (D,) int64          the theta index of each slot
+    conn_slots : (C + 1,) int64      the slots of connection c are ``conn_slots[c]:conn_slots[c + 1]``
+    theta_is_param : tuple of bool   theta i is a parameter (else a free weight)
+
+    So ``conn[weight_conn[j]] += coef[weight_coef[j]] * (free value or 1)`` over the weights, and
+    ``dconn[term_slot[i]] += term_expr[i] * (free value or 1)`` over the terms.
+    """
+
+    coefs: tuple[Expr, ...]
+    weight_coef: np.ndarray
+    weight_free: tuple[str | None, ...]
+    weight_conn: np.ndarray
+    term_expr: tuple[Expr, ...]
+    term_free: tuple[str | None, ...]
+    term_slot: np.ndarray
+    slot_theta: np.ndarray
+    conn_slots: np.ndarray
+    theta_is_param: tuple[bool, ...]
+
+    @property
+    def n_connections(self) -> int:
+        return int(self.conn_slots.shape[0]) - 1
+
+    @property
+    def n_slots(self) -> int:
+        return int(self.slot_theta.shape[0])
 
 
 def _evaluate(expr, env: Mapping[str, float]) -> float:
@@ -51,6 +101,8 @@ class CompiledNetwork:
         theta order.
     n_inputs, n_outputs : int
     input_names, output_names : tuple of str
+    weights : WeightTable
+        How the connection values and their derivatives follow from theta.
     """
 
     def __init__(self, net: Network, free: Sequence[str] | None = None) -> None:
@@ -67,6 +119,18 @@ class CompiledNetwork:
         self._theta_free = {n: i for i, n in enumerate(self.names) if n not in self._param_names}
         self._build_expressions()
         self._build_derivatives()
+        self.weights = WeightTable(
+            coefs=tuple(self._exprs),
+            weight_coef=_frozen(self._weight_expr, np.int64),
+            weight_free=tuple(self._weight_free),
+            weight_conn=_frozen(self._flat.weight_conn, np.int64),
+            term_expr=tuple(expr for _, _, expr, _ in self._terms),
+            term_free=tuple(f for _, _, _, f in self._terms),
+            term_slot=_frozen(self._term_slot, np.int64),
+            slot_theta=_frozen(self._dtheta, np.int64),
+            conn_slots=_frozen(self._dptr, np.int64),
+            theta_is_param=tuple(n in self._theta_param for n in self.names),
+        )
 
     # ------------------------------------------------------------------ construction
     def _theta_names(self, free: Sequence[str] | None) -> tuple[str, ...]:

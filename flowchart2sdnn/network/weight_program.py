@@ -1,6 +1,6 @@
 """The weights of a compiled network as postfix programs a numba kernel evaluates (the quasi-online kernel).
 
-The quasi-online run (:mod:`.online_kernel`) changes the parameters inside its numba loop, so the connection
+The quasi-online run (:mod:`flowchart2sdnn.identify.online_kernel`) changes the parameters inside its numba loop, so the connection
 values and their theta-derivatives cannot come from the Python runtime: the runtime's weight expressions are
 compiled once into flat arrays of operations (:func:`weight_program`) that :func:`eval_weights` runs.
 """
@@ -56,23 +56,23 @@ def _postfix(expr, index: dict[str, int], ops: list, iarg: list, farg: list) -> 
 def weight_program(compiled: CompiledNetwork) -> WeightProgram:
     """Compile the weight expressions of `compiled` (its coefs and their derivatives) for :func:`eval_weights`.
 
-    Reads the runtime's private tables (same package): the distinct coef expressions, the weight -> coef and
-    weight -> free-weight maps, the derivative terms and their connection/theta slots.
+    Reads only the public :attr:`CompiledNetwork.weights` table, the parameter and free-weight lists of
+    ``compiled.net`` (their start values) and ``compiled.names``.
     """
     net = compiled.net
+    table = compiled.weights
     pindex = {p.name: i for i, p in enumerate(net.parameters)}
     findex = {f.name: i for i, f in enumerate(net.free_weights)}
     ops: list[int] = []
     iarg: list[int] = []
     farg: list[float] = []
     ptr = [0]
-    programs = list(compiled._exprs) + [expr for _, _, expr, _ in compiled._terms]
-    for expr in programs:
+    for expr in table.coefs + table.term_expr:
         _postfix(expr, pindex, ops, iarg, farg)
         ptr.append(len(ops))
-    weight_free = [findex[f] if f is not None else -1 for f in compiled._weight_free]
-    term_free = [findex[f] if f is not None else -1 for _, _, _, f in compiled._terms]
-    theta_is_param = [1 if n in pindex and n in compiled._theta_param else 0 for n in compiled.names]
+    weight_free = [findex[f] if f is not None else -1 for f in table.weight_free]
+    term_free = [findex[f] if f is not None else -1 for f in table.term_free]
+    theta_is_param = [1 if flag else 0 for flag in table.theta_is_param]
     theta_idx = [pindex[n] if flag else findex[n] for n, flag in zip(compiled.names, theta_is_param, strict=True)]
     i64 = np.int64
     exprs = (
@@ -80,10 +80,10 @@ def weight_program(compiled: CompiledNetwork) -> WeightProgram:
         np.array(iarg, dtype=i64),
         np.array(farg, dtype=float),
         np.array(ptr, dtype=i64),
-        np.ascontiguousarray(compiled._weight_expr, dtype=i64),
+        np.array(table.weight_coef, dtype=i64),
         np.array(weight_free, dtype=i64),
-        np.ascontiguousarray(compiled._flat.weight_conn, dtype=i64),
-        np.ascontiguousarray(compiled._term_slot, dtype=i64),
+        np.array(table.weight_conn, dtype=i64),
+        np.array(table.term_slot, dtype=i64),
         np.array(term_free, dtype=i64),
         np.array(theta_is_param, dtype=i64),
         np.array(theta_idx, dtype=i64),
@@ -91,7 +91,7 @@ def weight_program(compiled: CompiledNetwork) -> WeightProgram:
         np.array([float(f.init) for f in net.free_weights], dtype=float),
     )
     longest = max([b - a for a, b in zip(ptr[:-1], ptr[1:], strict=True)] + [1])
-    return WeightProgram(exprs, compiled._flat.n_connections, int(compiled._dtheta.shape[0]), longest)
+    return WeightProgram(exprs, table.n_connections, table.n_slots, longest)
 
 
 @numba.njit(cache=True)

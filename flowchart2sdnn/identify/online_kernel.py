@@ -28,9 +28,9 @@ accepted step only moved to the minimum of that stale model, and none of the fou
 **Trial mode** (``tries = 0``, the previous algorithm, kept for comparison). Two copies of the network run free
 alongside the record:
 
-* the *model*, with the accepted internal parameters u: an RTRL step per sample (as
-  :func:`.kernels.jacobian_kernel`) gives its output and ``S(t) = d a(t) / d x``; the window row is
-  ``J(t) = S_out(t) * dx/du`` with the a-priori error ``e(t) = y(t) - yhat(t)``;
+* the *model*, with the accepted internal parameters u: an RTRL step per sample (the offline Jacobian's
+  :func:`flowchart2sdnn.network.kernels.rtrl_step`) gives its output and ``S(t) = d a(t) / d x``; the window
+  row is ``J(t) = S_out(t) * dx/du`` with the a-priori error ``e(t) = y(t) - yhat(t)``;
 * the *trial*, with ``u_trial = u + du``, the LM step from u computed on the current window
   (``(A + mu I) du = g``, Cholesky, a larger damping when rounding makes the matrix indefinite), recomputed
   every ``every`` samples as the window slides. The trial is only simulated.
@@ -62,7 +62,11 @@ non-finite model output adopts the trial's parameters and state when they are fi
 the history with zero sensitivities; the sample's row is skipped and the event recorded. Nothing non-finite
 ever enters the window.
 
-Float state ``fs`` and integer state ``its``: see the ``F_*`` and ``I_*`` constants.
+Layout: this module holds the state, the per-sample loop and the trial mode; :mod:`.online_window` the window
+numerics (FIFO sums, the damped step, the window mode's iteration). Both run the network with the offline
+kernels' steps (:mod:`flowchart2sdnn.network.kernels`) and move mu by the offline trainer's schedule
+(:mod:`flowchart2sdnn.fit.damping`). Float state ``fs`` and integer state ``its``: see the ``F_*`` and ``I_*``
+constants of :mod:`.online_window`.
 """
 
 from __future__ import annotations
@@ -73,8 +77,43 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .kernels import _slope, _transfer  # one definition of the transfer functions for both kernels
-from .weight_program import WeightProgram, eval_weights, weight_program  # noqa: F401 - re-exported
+from ..network.weight_program import WeightProgram, eval_weights, weight_program  # noqa: F401 - re-exported
+from .online_window import (  # noqa: F401 - re-exported: the run's state layout and window numerics
+    F_CC,
+    F_CH,
+    F_EE,
+    F_MU,
+    F_NL,
+    I_ACCEPTED,
+    I_BLOCK_POS,
+    I_CHOL_FALLBACK,
+    I_COUNT,
+    I_DIVERGED,
+    I_HEAD,
+    I_N_DIV_T,
+    I_NEXT,
+    I_REJECTED,
+    I_RESYNC,
+    I_SINCE_RESYNC,
+    I_SKIPPED,
+    I_STEPS,
+    N_FS,
+    N_ITS,
+    _external,
+    _lm_step,
+    _push_row,
+    _set,
+    _window_iteration,
+    cholesky_solve,
+    mu_accepted,
+    mu_refused,
+    resync,
+    rtrl,
+    scaled_mu,
+    simulate,
+    window_rtrl,
+    window_sim,
+)
 
 __all__ = [
     "WeightProgram",
@@ -95,73 +134,7 @@ __all__ = [
 #: misses is at most this fraction of the predicted change (both as sums of squares).
 LINEARITY_TOL = 0.25
 
-F_MU, F_EE, F_CC, F_CH, F_NL = range(5)
-(I_COUNT, I_HEAD, I_STEPS, I_BLOCK_POS, I_ACCEPTED, I_REJECTED, I_DIVERGED, I_CHOL_FALLBACK,
- I_SKIPPED, I_RESYNC, I_N_DIV_T, I_NEXT, I_SINCE_RESYNC) = range(13)
-N_FS, N_ITS = 5, 13
 STATUS_OK, STATUS_DIVERGED_BEFORE_START = 0, 1
-
-
-# ------------------------------------------------------------------------------------------ small numerics
-@numba.njit(cache=True, inline="always")
-def _external(u, kind, lo, hi, x, dxdu):
-    """x(u) and dx/du, the formulas of fit/transforms.py (result clipped into [lo, hi] for two bounds)."""
-    for i in range(u.shape[0]):
-        k = kind[i]
-        ui = u[i]
-        if k == 0:
-            x[i] = ui
-            dxdu[i] = 1.0
-        elif k == 1 or k == 2:
-            root = math.sqrt(ui * ui + 1.0)
-            r = ui * ui / (root + 1.0)  # = sqrt(u^2+1) - 1 without cancellation
-            if k == 1:
-                x[i] = lo[i] + r
-                dxdu[i] = ui / root
-            else:
-                x[i] = hi[i] - r
-                dxdu[i] = -ui / root
-        else:
-            half = 0.5 * hi[i] - 0.5 * lo[i]
-            centre = 0.5 * lo[i] + 0.5 * hi[i]
-            x[i] = min(max(centre + half * math.sin(ui), lo[i]), hi[i])
-            dxdu[i] = half * math.cos(ui)
-
-
-@numba.njit(cache=True)
-def cholesky_solve(M, rhs, L, out):
-    """Solve M out = rhs for symmetric M (P, P) by Cholesky M = L L^T; False if M is not positive definite.
-
-    Only the lower triangle of M is read. `L` (P, P) is scratch.
-    """
-    n = M.shape[0]
-    for j in range(n):
-        s = M[j, j]
-        for k in range(j):
-            s -= L[j, k] * L[j, k]
-        if not s > 0.0 or not math.isfinite(s):
-            return False
-        d = math.sqrt(s)
-        L[j, j] = d
-        for i in range(j + 1, n):
-            s = M[i, j]
-            for k in range(j):
-                s -= L[i, k] * L[j, k]
-            L[i, j] = s / d
-    for i in range(n):  # L z = rhs
-        s = rhs[i]
-        for k in range(i):
-            s -= L[i, k] * out[k]
-        out[i] = s / L[i, i]
-    for i in range(n - 1, -1, -1):  # L^T out = z
-        s = out[i]
-        for k in range(i + 1, n):
-            s -= L[k, i] * out[k]
-        out[i] = s / L[i, i]
-    for i in range(n):
-        if not math.isfinite(out[i]):
-            return False
-    return True
 
 
 # ------------------------------------------------------------------------------------------ state
@@ -252,194 +225,6 @@ def new_state(u0: np.ndarray, n_connections: int, n_slots: int, history: np.ndar
     )
 
 
-# ------------------------------------------------------------------------------------------ network steps
-@numba.njit(cache=True)
-def _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2):
-    """One time step of eq. (1)-(2) and RTRL into slot ``t % ring``; also the block sensitivities `s_blk`
-    (same recursion, zero at the block start) when `with_blk`."""
-    conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, _ = net
-    ring = a_buf.shape[0]
-    n_theta = s_buf.shape[2]
-    slot = t % ring
-    for d in range(ring):
-        slot_of[d] = (t - d + ring) % ring
-    for k in range(transfer.shape[0]):
-        n = 0.0
-        dn[:] = 0.0
-        if with_blk:
-            dn2[:] = 0.0
-        for c in range(conn_ptr[k], conn_ptr[k + 1]):
-            kind = conn_kind[c]
-            d = conn_delay[c]
-            w = conn_val[c]
-            if kind == 0:
-                src_slot = slot_of[d]
-                src = conn_src[c]
-                x = a_buf[src_slot, src]
-                if t - d >= 0 and w != 0.0:  # the history has zero sensitivity
-                    for p in range(n_theta):
-                        dn[p] += w * s_buf[src_slot, src, p]
-                    if with_blk:
-                        for p in range(n_theta):
-                            dn2[p] += w * s_blk[src_slot, src, p]
-            elif kind == 1:
-                x = inputs[max(t - d, 0), conn_src[c]]
-            else:
-                x = 1.0
-            n += w * x
-            for e in range(dptr[c], dptr[c + 1]):
-                dn[dtheta[e]] += x * dval[e]
-                if with_blk:
-                    dn2[dtheta[e]] += x * dval[e]
-        a = _transfer(transfer[k], n)
-        a_buf[slot, k] = a
-        g = _slope(transfer[k], n, a)
-        for p in range(n_theta):
-            s_buf[slot, k, p] = g * dn[p]
-        if with_blk:
-            for p in range(n_theta):
-                s_blk[slot, k, p] = g * dn2[p]
-
-
-@numba.njit(cache=True)
-def _simulate_step(t, inputs, net, conn_val, a_buf, slot_of):
-    conn_ptr, conn_kind, conn_src, conn_delay, transfer, _, _, _ = net
-    ring = a_buf.shape[0]
-    for d in range(ring):
-        slot_of[d] = (t - d + ring) % ring
-    for k in range(transfer.shape[0]):
-        n = 0.0
-        for c in range(conn_ptr[k], conn_ptr[k + 1]):
-            kind = conn_kind[c]
-            if kind == 0:
-                x = a_buf[slot_of[conn_delay[c]], conn_src[c]]
-            elif kind == 1:
-                x = inputs[max(t - conn_delay[c], 0), conn_src[c]]
-            else:
-                x = 1.0
-            n += conn_val[c] * x
-        a_buf[t % ring, k] = _transfer(transfer[k], n)
-
-
-# ------------------------------------------------------------------------------------------ window
-@numba.njit(cache=True)
-def resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its):
-    """Recompute the window sums from the ring (valid rows ``head - count .. head - 1``), re-referenced to u."""
-    window, n_out, n_theta = win_J.shape
-    A[:, :] = 0.0
-    b[:] = 0.0
-    cc = 0.0
-    ee = 0.0
-    count = its[I_COUNT]
-    for i in range(count):
-        q = (its[I_HEAD] - count + i + window) % window
-        for o in range(n_out):
-            jq = win_J[q, o]
-            shift = 0.0
-            for p in range(n_theta):
-                shift += jq[p] * (u[p] - u_ref[p])
-            c = win_c[q, o] - shift
-            win_c[q, o] = c
-            cc += c * c
-            ee += win_e[q, o] * win_e[q, o]
-            for p in range(n_theta):
-                for r in range(p + 1):
-                    A[p, r] += jq[p] * jq[r]
-                b[p] += jq[p] * c
-    u_ref[:] = u
-    fs[F_CC] = cc
-    fs[F_EE] = ee
-
-
-@numba.njit(cache=True)
-def _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its):
-    """FIFO: drop the oldest row when the window is full, add (J, e); resync every Q pushes."""
-    window, n_out, n_theta = win_J.shape
-    h = its[I_HEAD]
-    if its[I_COUNT] == window:  # full: the oldest row sits at the head
-        for o in range(n_out):
-            jo = win_J[h, o]
-            co = win_c[h, o]
-            fs[F_CC] -= co * co
-            fs[F_EE] -= win_e[h, o] * win_e[h, o]
-            for p in range(n_theta):
-                for r in range(p + 1):
-                    A[p, r] -= jo[p] * jo[r]
-                b[p] -= jo[p] * co
-    else:
-        its[I_COUNT] += 1
-    for o in range(n_out):
-        c = e[o]
-        for p in range(n_theta):
-            c += J[o, p] * (u[p] - u_ref[p])
-        win_c[h, o] = c
-        win_e[h, o] = e[o]
-        fs[F_CC] += c * c
-        fs[F_EE] += e[o] * e[o]
-        for p in range(n_theta):
-            win_J[h, o, p] = J[o, p]
-            for r in range(p + 1):
-                A[p, r] += J[o, p] * J[o, r]
-            b[p] += J[o, p] * c
-    its[I_HEAD] = (h + 1) % window
-    its[I_SINCE_RESYNC] += 1
-    if its[I_SINCE_RESYNC] >= window:
-        resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its)
-        its[I_SINCE_RESYNC] = 0
-        its[I_RESYNC] += 1
-
-
-@numba.njit(cache=True)
-def _lm_step(A, b, u_ref, u, mu, mu_inc, M, L, g, delta, its):
-    """The LM step from u: (A + mu I) delta = g = b - A (u - u_ref) by Cholesky. When rounding makes the matrix
-    indefinite the damping grows from 1e-14 max diag(A) (it is then a numerical regularisation, not mu).
-    False when nothing works (no step)."""
-    n = u.shape[0]
-    diag_max = 0.0
-    for p in range(n):
-        diag_max = max(diag_max, A[p, p])
-    for p in range(n):
-        s = b[p]
-        for r in range(n):
-            s -= (A[p, r] if r <= p else A[r, p]) * (u[r] - u_ref[r])
-        g[p] = s
-    m = mu
-    for attempt in range(64):
-        for p in range(n):
-            for r in range(p + 1):
-                M[p, r] = A[p, r]
-            M[p, p] += m
-        if cholesky_solve(M, g, L, delta):
-            if attempt > 0:
-                its[I_CHOL_FALLBACK] += 1
-            return True
-        m = max(m * mu_inc, 1e-14 * diag_max)
-        if m > max(1e300, diag_max):
-            break
-    its[I_SKIPPED] += 1
-    return False
-
-
-@numba.njit(cache=True)
-def scaled_mu(A, mu0, tau, mu_max):
-    """The first damping scaled to the window: ``min(mu_max, max(mu0, tau * max diag(A)))``, the rule of
-    fit/lm.py's ``LMOptions.tau`` (Madsen, Nielsen & Tingleff 2004, section 3.2) in the same internal
-    coordinates; `A` holds JᵀJ in its lower triangle."""
-    peak = 0.0
-    for p in range(A.shape[0]):
-        if math.isfinite(A[p, p]):
-            peak = max(peak, A[p, p])
-    return min(mu_max, max(mu0, tau * peak))
-
-
-# ------------------------------------------------------------------------------------------ parameters
-@numba.njit(cache=True)
-def _set(u, x, dxdu, conn_val, dval, bnd, wp, stack):
-    """x, dx/du and the weights at u; False when a weight is not finite."""
-    _external(u, bnd[0], bnd[1], bnd[2], x, dxdu)
-    return eval_weights(x, wp, conn_val, dval, stack)
-
-
 @numba.njit(cache=True)
 def prepare(st_model, st_trial, bnd, wp, stack):
     """Weights of the model and the trial at their start parameters; False when they are not finite."""
@@ -452,14 +237,6 @@ def prepare(st_model, st_trial, bnd, wp, stack):
 
 
 @numba.njit(cache=True)
-def _all_finite(a):
-    for v in a.ravel():
-        if not math.isfinite(v):
-            return False
-    return True
-
-
-@numba.njit(cache=True)
 def _note_divergence(t, div_t, its):
     if its[I_N_DIV_T] < div_t.shape[0]:
         div_t[its[I_N_DIV_T]] = t
@@ -467,6 +244,7 @@ def _note_divergence(t, div_t, its):
     its[I_DIVERGED] += 1
 
 
+# ------------------------------------------------------------------------------------------ trial mode
 @numba.njit(cache=True)
 def _new_block(stm, stt, bnd, wp, stack, fs, its):
     """The trial restarts from the model (parameters and state); block sums and sensitivities restart at 0."""
@@ -488,112 +266,6 @@ def _adopt_trial(stm, stt, bnd, wp, stack):
     u[:] = stt[0]
     _set(u, x, dxdu, conn_val, dval, bnd, wp, stack)
     a_buf[:, :] = stt[5]
-
-
-# ------------------------------------------------------------------------------------------ window mode
-@numba.njit(cache=True)
-def window_sim(inputs, targets, net, conn, win_state, win_time, its, a_tr, slot_of, e_tr, tr_state,
-               limit=math.inf):
-    """Simulate the window's samples again with the connection values `conn`: a free run from the stored state
-    before the oldest row (a gap left by a skipped row restarts from that row's stored state).
-
-    Writes each row's error to `e_tr` and the state before its sample to `tr_state` (indexed like the rows);
-    `a_tr` ends as the state after the newest sample. Returns 1/2 the sum of the squared errors, inf when the
-    run is not finite or as soon as that cost exceeds `limit` (a refused trial need not be run to its end)."""
-    window = win_time.shape[0]
-    output_index = net[7]
-    count = its[I_COUNT]
-    head = its[I_HEAD]
-    ring = a_tr.shape[0]
-    cost = 0.0
-    prev = -2
-    for i in range(count):
-        q = (head - count + i + window) % window
-        tq = win_time[q]
-        if tq != prev + 1:
-            a_tr[:, :] = win_state[q]
-        tr_state[q] = a_tr
-        _simulate_step(tq, inputs, net, conn, a_tr, slot_of)
-        slot = tq % ring
-        for o in range(output_index.shape[0]):
-            err = targets[tq, o] - a_tr[slot, output_index[o]]
-            e_tr[q, o] = err
-            cost += err * err
-        if not 0.5 * cost <= limit or cost > 1e300:
-            return math.inf
-        prev = tq
-    return 0.5 * cost
-
-
-@numba.njit(cache=True)
-def window_rtrl(inputs, targets, net, stm, wnd, win_state, win_time, its, slot_of, dn, dn2):
-    """Relinearise the window at the model's parameters: simulate its samples again with RTRL (sensitivities
-    zero before the oldest row and after a gap) and replace every row's Jacobian, error and stored state.
-
-    The model ends with the state and sensitivities after the newest sample; the window sums are not touched
-    (call :func:`resync`)."""
-    u, dxdu, conn_val, dval, a_buf, s_buf, s_blk = stm[0], stm[2], stm[3], stm[4], stm[5], stm[6], stm[7]
-    win_J, win_c, win_e = wnd[0], wnd[1], wnd[2]
-    window = win_time.shape[0]
-    output_index = net[7]
-    ring = a_buf.shape[0]
-    count = its[I_COUNT]
-    head = its[I_HEAD]
-    prev = -2
-    for i in range(count):
-        q = (head - count + i + window) % window
-        tq = win_time[q]
-        if tq != prev + 1:
-            a_buf[:, :] = win_state[q]
-            s_buf[:, :, :] = 0.0
-        win_state[q] = a_buf
-        _rtrl_step(tq, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, False, slot_of, dn, dn2)
-        slot = tq % ring
-        for o in range(output_index.shape[0]):
-            r = output_index[o]
-            err = targets[tq, o] - a_buf[slot, r]
-            win_e[q, o] = err
-            win_c[q, o] = err
-            for p in range(u.shape[0]):
-                win_J[q, o, p] = s_buf[slot, r, p] * dxdu[p]
-        prev = tq
-
-
-@numba.njit(cache=True)
-def _window_iteration(inputs, targets, net, wp, bnd, fopt, tries, stm, stt, wnd, rsm, fs, its, stack, slot_of,
-                      M, L, g, delta, dn, dn2):
-    """One LM iteration on the window (module docstring, window mode): up to `tries` trials, each judged by
-    the window cost of a new simulation at the trial; the accepted one is relinearised."""
-    mu_inc, mu_dec, mu_min, mu_max, tau = fopt[0], fopt[1], fopt[2], fopt[3], fopt[4]
-    u, x, dxdu, conn_val, dval = stm[0], stm[1], stm[2], stm[3], stm[4]
-    u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, a_tr = stt[0], stt[1], stt[2], stt[3], stt[4], stt[5]
-    win_J, win_c, win_e, A, b, u_ref = wnd
-    win_state, win_time, e_tr, tr_state = rsm
-    cost_u = 0.5 * max(fs[F_EE], 0.0)  # the rows' errors are those of the run at u (relinearised or new)
-    for _ in range(tries):
-        if its[I_ACCEPTED] + its[I_REJECTED] == 0 and tau > 0.0:
-            fs[F_MU] = scaled_mu(A, fs[F_MU], tau, mu_max)
-        if not _lm_step(A, b, u_ref, u, fs[F_MU], mu_inc, M, L, g, delta, its):
-            break
-        for p in range(u.shape[0]):
-            u_tr[p] = u[p] + delta[p]
-        cost = math.inf
-        if _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack):
-            cost = window_sim(inputs, targets, net, conn_tr, win_state, win_time, its, a_tr, slot_of, e_tr,
-                              tr_state, cost_u)
-        if cost < cost_u:
-            u[:] = u_tr
-            _set(u, x, dxdu, conn_val, dval, bnd, wp, stack)
-            window_rtrl(inputs, targets, net, stm, wnd, win_state, win_time, its, slot_of, dn, dn2)
-            u_ref[:] = u  # the rows are fresh at u: no first-order shift
-            resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its)
-            fs[F_MU] = max(fs[F_MU] * mu_dec, mu_min)
-            its[I_ACCEPTED] += 1
-            break
-        fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
-        its[I_REJECTED] += 1
-    u_tr[:] = u
-    _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)
 
 
 # ------------------------------------------------------------------------------------------ the kernel
@@ -645,7 +317,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
         slot = t % ring
         if replay:
             before[:, :] = a_buf
-        _rtrl_step(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, active and not replay, slot_of, dn, dn2)
+        rtrl(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, active and not replay, slot_of, dn, dn2)
         sq = 0.0
         jj = 0.0
         for o in range(n_out):
@@ -663,7 +335,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
         if active and replay:
             trial_ok = False  # no trial runs alongside: a diverged model restarts from the history
         elif active:
-            _simulate_step(t, inputs, net, conn_tr, a_tr, slot_of)
+            simulate(t, inputs, net, conn_tr, a_tr, slot_of)
             st = 0.0
             for o in range(n_out):
                 r = output_index[o]
@@ -685,7 +357,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
                 for s in range(ring):
                     a_buf[s, :] = history
             s_buf[:, :, :] = 0.0
-            fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
+            fs[F_MU] = mu_refused(fs[F_MU], mu_inc, mu_max)
             _new_block(stm, stt, bnd, wp, stack, fs, its)
         elif replay:
             h = its[I_HEAD]
@@ -708,7 +380,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
             if active and not trial_ok:
                 _note_divergence(t, div_t, its)
                 its[I_REJECTED] += 1
-                fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
+                fs[F_MU] = mu_refused(fs[F_MU], mu_inc, mu_max)
                 _new_block(stm, stt, bnd, wp, stack, fs, its)
             elif active:
                 fs[F_CH] += ch
@@ -717,10 +389,10 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
                 if its[I_BLOCK_POS] >= block:
                     if fs[F_NL] <= LINEARITY_TOL * fs[F_CH]:
                         _adopt_trial(stm, stt, bnd, wp, stack)
-                        fs[F_MU] = max(fs[F_MU] * mu_dec, mu_min)
+                        fs[F_MU] = mu_accepted(fs[F_MU], mu_dec, mu_min)
                         its[I_ACCEPTED] += 1
                     else:
-                        fs[F_MU] = min(fs[F_MU] * mu_inc, mu_max)
+                        fs[F_MU] = mu_refused(fs[F_MU], mu_inc, mu_max)
                         its[I_REJECTED] += 1
                     _new_block(stm, stt, bnd, wp, stack, fs, its)
                 if (t - start) % every == 0:
