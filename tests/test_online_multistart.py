@@ -22,7 +22,7 @@ from flowchart2sdnn.fit.multistart import draw_starts
 from flowchart2sdnn.identify.online import OnlineOptions, quasi_online
 from flowchart2sdnn.identify.problem import build_problem, required_columns
 from flowchart2sdnn.identify.run import IdentifySettings, identify
-from flowchart2sdnn.identify.workers import online_start
+from flowchart2sdnn.identify.workers import quasi_online_start
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 DIAGRAMS = Path(__file__).resolve().parents[1] / "diagrams"
@@ -88,7 +88,7 @@ def test_every_start_is_handed_to_the_executor(record):
             return super().map(fn, items)
 
     identify(chart, data, None, SETTINGS, executor=Recording())
-    assert calls == [(online_start, SETTINGS.starts)]
+    assert calls == [(quasi_online_start, SETTINGS.starts)]
 
 
 def test_a_stop_after_the_first_run_keeps_that_run_marked_interrupted(record):

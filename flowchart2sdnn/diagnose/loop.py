@@ -27,22 +27,27 @@ a Dask cluster with the same results as in this process.
 
 from __future__ import annotations
 
-import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
-import numpy as np
-
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
-from ..identify.problem import Problem, build_problem, metrics
-from ..identify.run import Identification, IdentifySettings, identify
-from ..identify.settings import REFIT_TAU
 from ..strictjson import finite_or_none
 from .effects import BUILTIN_EFFECTS, Effect, Scales
-from .residual import signal_correlation, whiteness
+from .fitting import (
+    DEFAULT_SPLIT,
+    DiagnoseSettings,
+    Fitted,
+    Progress,
+    current_problem,
+    effect_scales,
+    fit_chart,
+    fit_growing,
+    horizons,
+    residual_analysis,
+)
 from .score import Candidate, Score, Screen, screen
 
 __all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "refit_unit", "refusal", "fit_chart", "horizons",
@@ -50,101 +55,6 @@ __all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "refit_unit", 
 
 REPORT_FORMAT = "sdnn-diagnose"
 REPORT_VERSION = 1
-DEFAULT_SPLIT = 0.7
-
-Progress = Callable[[str, "float | None"], None]
-
-
-@dataclass(frozen=True)
-class DiagnoseSettings:
-    """Options of :func:`diagnose` (the CLI's flags)."""
-
-    rounds: int = 3
-    top: int = 5
-    top_options: int = 25
-    runners_up: int = 2
-    refit_iter: int = 40
-    max_iter: int = 100
-    alpha: float = 1e-3
-    criterion: str = "bic"
-    min_gain: float = 0.02
-    alignment: str = "zoh"
-    seed: int = 0
-    split: float | None = None
-    # the refit from the chart as given of a candidate that is not neutral (a scanned gap, clip or delay) is
-    # done twice, the second time with a growing horizon: first on the leading `horizon` samples of each
-    # training record, then on 4x longer leading parts, each stage from the last one's fit, up to the whole
-    # records (0: off). A drive with backlash is chaotic: from the chart as given a fit of the gap over whole
-    # 3 s records stops in a local minimum (backlash bench: validation RMS 0.127, d +5.6 %); 500 samples are
-    # shorter than the time the trajectories take to diverge, and from there the longer stages stay in the
-    # right basin (0.0595, every linear parameter within 1 %). In addition to the plain refit, not instead: a
-    # learned friction curve bent on the first 0.5 s of a 30 s record ends worse (friction bench: validation
-    # RMS 0.079 against 0.056)
-    horizon: int = 500
-    lm_tau: float = REFIT_TAU  # see identify.settings: the brief refits start next to a fit
-
-    def __post_init__(self) -> None:
-        if self.rounds < 0:
-            raise ValueError("rounds must not be negative")
-        if self.top < 1 or self.top_options < 1:
-            raise ValueError("top and top_options must be at least 1")
-        if self.refit_iter < 1 or self.max_iter < 0:
-            raise ValueError("refit_iter must be >= 1 and max_iter >= 0")
-        if not 0 < self.alpha < 1:
-            raise ValueError("alpha must lie strictly between 0 and 1")
-        if self.criterion not in ("aic", "bic"):
-            raise ValueError("criterion must be 'aic' or 'bic'")
-        if not 0 <= self.min_gain < 1:
-            raise ValueError("min_gain must lie in [0, 1)")
-        if self.horizon < 0:
-            raise ValueError("horizon must not be negative")
-        if self.split is not None and not 0 < self.split < 1:
-            raise ValueError("split must lie strictly between 0 and 1")
-
-
-@dataclass(frozen=True, eq=False)
-class Fitted:
-    """A chart fitted on the training record, with its validation error and information criteria."""
-
-    identification: Identification
-    cost: float
-    n: int
-    k: int
-    validation: dict
-    start: str = "chart"
-    accepted: tuple = ()
-
-    @property
-    def diagram(self) -> Diagram:
-        return self.identification.diagram
-
-    @property
-    def rms(self) -> float:
-        return math.sqrt(2 * self.cost / self.n) if self.n and math.isfinite(self.cost) else math.inf
-
-    @property
-    def validation_rms(self) -> float:
-        return self.validation["rms_all"]
-
-    @property
-    def validation_median(self) -> float:
-        """The RMS (all outputs) of the median validation record: what a typical record shows."""
-        each = self.validation.get("rms_records", [])
-        return float(np.median(each)) if each else math.nan
-
-    def criterion(self, which: str) -> float:
-        if not (self.cost > 0 and math.isfinite(self.cost)):
-            return -math.inf if self.cost == 0 else math.inf
-        fit = self.n * math.log(2 * self.cost / self.n)
-        return fit + (2 * self.k if which == "aic" else self.k * math.log(self.n))
-
-    @property
-    def aic(self) -> float:
-        return self.criterion("aic")
-
-    @property
-    def bic(self) -> float:
-        return self.criterion("bic")
 
 
 @dataclass(frozen=True, eq=False)
@@ -159,115 +69,6 @@ class Diagnosis:
 
 
 # ------------------------------------------------------------------------------------------------ helpers
-def _rms_all(ms: Sequence[dict], n_out: int) -> float:
-    sse = cnt = 0.0
-    for m in ms:
-        if m["cost"] is None:
-            return math.inf
-        sse += 2 * m["cost"]
-        cnt += m["rows"] * n_out
-    return math.sqrt(sse / cnt) if cnt else math.nan
-
-
-def _validate(ident: Identification, records: Sequence[tuple[Dataset, int]], alignment: str) -> dict:
-    compiled = ident.problem.compiled
-    per = [metrics(compiled, ident.x, ds, alignment, score_from=start) for ds, start in records]
-    return {"rms_all": _rms_all(per, compiled.n_outputs), "records": per,
-            "rms_records": [_rms_all([m], compiled.n_outputs) for m in per]}
-
-
-def fit_chart(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int,
-              extra_dof: int, start: str, progress: Progress | None = None, accepted: tuple = ()) -> Fitted:
-    """Fit `diagram` on the training records and score it on the validation `records` ((Dataset, first row))."""
-    return _fitted(_identify(diagram, train, settings, max_iter, progress), records, settings, extra_dof, start,
-                   accepted)
-
-
-def _identify(diagram: Diagram, train: list[Dataset], settings: DiagnoseSettings, max_iter: int,
-              progress: Progress | None = None) -> Identification:
-    s = IdentifySettings(max_iter=max_iter, seed=settings.seed, alignment=settings.alignment, lm_tau=settings.lm_tau)
-    return identify(diagram, train if len(train) > 1 else train[0], None, s, progress)
-
-
-def _fitted(ident: Identification, records, settings: DiagnoseSettings, extra_dof: int, start: str,
-            accepted: tuple) -> Fitted:
-    cost = ident.fit.train.cost
-    cost = math.inf if cost is None else float(cost)
-    return Fitted(ident, cost, ident.problem.n_residuals, len(ident.problem.names) + extra_dof,
-                  _validate(ident, records, settings.alignment), start, accepted)
-
-
-def horizons(train: Sequence[Dataset], first: int) -> list[int]:
-    """The leading lengths (samples) of the growing-horizon stages before the fit on the whole records."""
-    longest = max(d.n_rows for d in train)
-    out, h = [], first
-    while 0 < h < longest:
-        out.append(h)
-        h *= 4
-    return out
-
-
-def _fit_growing(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int,
-                 extra_dof: int, start: str, accepted: tuple = ()) -> Fitted:
-    """:func:`fit_chart` on the leading parts of the training records (``settings.horizon`` samples, then 4x longer),
-    each stage from the last one's fit, and finally on the whole records."""
-    for h in horizons(train, settings.horizon):
-        try:
-            ident = _identify(diagram, [d.slice(0, h) if d.n_rows > h else d for d in train], settings, max_iter)
-        except (SdnnError, ValueError, KeyError):
-            break  # a stage the short parts cannot support: the fit on the whole records decides
-        if ident.status == "interrupted":
-            return _fitted(ident, records, settings, extra_dof, start, accepted)
-        cost = ident.fit.train.cost
-        if cost is None or not math.isfinite(cost):
-            break  # diverged on a short stage: continue from where it was
-        diagram = ident.diagram
-    return fit_chart(diagram, train, records, settings, max_iter, extra_dof, start, None, accepted)
-
-
-def _current_problem(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> Problem:
-    return build_problem(fitted.diagram, train[0], settings.alignment, settings.seed, more=tuple(train[1:]))
-
-
-def _signals(problem: Problem, x: np.ndarray) -> dict[str, np.ndarray]:
-    """Every neuron's output over all training records, concatenated like the residual."""
-    parts = [problem.compiled.signals(x, s.inputs, s.init) for s in problem.segments]
-    return {k: np.concatenate([p[k] for p in parts]) for k in parts[0]}
-
-
-def _inputs(problem: Problem) -> np.ndarray:
-    return np.vstack([s.inputs for s in problem.segments])
-
-
-def _scales(problem: Problem) -> Scales:
-    x = problem.compiled.theta0()
-    sig = _signals(problem, x)
-    rms = {k: float(np.sqrt(np.mean(v**2))) for k, v in sig.items() if np.all(np.isfinite(v))}
-    lo, hi = {}, {}
-    u_all = _inputs(problem)
-    for i, name in enumerate(problem.compiled.input_names):
-        u = u_all[:, i]
-        rms[name] = float(np.sqrt(np.mean(u**2)))
-        lo[name], hi[name] = float(np.min(u)), float(np.max(u))
-    return Scales(rms, lo, hi)
-
-
-def residual_analysis(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> dict:
-    """Whiteness, independence from the inputs and the internal signals most correlated with the residual."""
-    problem = _current_problem(fitted, train, settings)
-    x = problem.compiled.theta0()
-    e = problem.residual(x)
-    if e is None:
-        return {"error": "the fitted chart diverges on the training record"}
-    e = e.reshape(-1, problem.compiled.n_outputs)
-    u = _inputs(problem)
-    out = whiteness(e, u, problem.compiled.output_names, problem.compiled.input_names)
-    sig = _signals(problem, x)
-    inputs = {n: u[:, i] for i, n in enumerate(problem.compiled.input_names)}
-    out["signals"] = signal_correlation(e, {**inputs, **sig}, problem.compiled.output_names)
-    return out
-
-
 def _summary(f: Fitted) -> dict:
     res = f.identification.fit.train
     val = f.validation["records"]
@@ -368,7 +169,7 @@ def _was_interrupted(fitted) -> bool:
 
 
 def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: Sequence[Dataset] = (),
-             settings: DiagnoseSettings = DiagnoseSettings(), effects: Sequence[Effect] | None = None,
+             settings: DiagnoseSettings | None = None, effects: Sequence[Effect] | None = None,
              progress: Progress | None = None, executor=None) -> Diagnosis:
     """Find what `diagram` lacks from measured data, add it, refit, and report before and after.
 
@@ -382,7 +183,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
     validation : sequence of Dataset
         Validation records (each simulated from its own first sample); empty: a split of `train`
         (``settings.split``, default 0.7), the model free-running over the whole record.
-    settings : DiagnoseSettings
+    settings : DiagnoseSettings, optional
     effects : sequence of Effect, optional
         The library to try (default: every built-in effect).
     progress : callable(text, fraction), optional
@@ -394,6 +195,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
     Diagnosis
     """
     t_start = time.perf_counter()
+    settings = settings or DiagnoseSettings()
     effects = tuple(BUILTIN_EFFECTS.values()) if effects is None else tuple(effects)
     train = [train] if isinstance(train, Dataset) else list(train)
     train, records, split = _split(train, list(validation), settings.split)
@@ -414,8 +216,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
         if interrupted:
             raise KeyboardInterrupt
         for r in range(1, settings.rounds + 1):
-            problem = _current_problem(current, train, settings)
-            cands = candidates(effects, current.diagram, _scales(problem), done)
+            problem = current_problem(current, train, settings)
+            cands = candidates(effects, current.diagram, effect_scales(problem), done)
             if not cands:
                 stop_reason = "no_candidates"
                 break
@@ -515,7 +317,7 @@ def refit_unit(unit: tuple) -> tuple[Fitted | None, float]:
     try:
         fitted = fit_chart(chart, train, records, settings, max_iter, dof, start, None, acc)
         if start == "nominal" and settings.horizon > 0 and not _was_interrupted(fitted):
-            grown = _fit_growing(chart, train, records, settings, max_iter, dof, "horizon", acc)
+            grown = fit_growing(chart, train, records, settings, max_iter, dof, "horizon", acc)
             if _was_interrupted(grown) or grown.cost < fitted.cost:
                 fitted = grown
     except (SdnnError, ValueError, KeyError):

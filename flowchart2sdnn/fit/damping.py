@@ -17,7 +17,10 @@ from __future__ import annotations
 
 import math
 
-__all__ = ["mu_accepted", "mu_refused", "first_mu"]
+__all__ = ["mu_accepted", "mu_refused", "first_mu", "TRAINLM_MU0"]
+
+#: trainlm's first damping, every trainer's ``mu0`` unless told otherwise.
+TRAINLM_MU0 = 1e-3
 
 
 def mu_accepted(mu: float, mu_dec: float, mu_min: float) -> float:

@@ -22,7 +22,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq
 
-from .damping import first_mu, mu_accepted, mu_refused
+from .damping import TRAINLM_MU0, first_mu, mu_accepted, mu_refused
 from .transforms import Bounds
 
 __all__ = ["LMOptions", "LMResult", "levenberg_marquardt", "STATUS_MESSAGES", "CONVERGED_STATUSES"]
@@ -59,7 +59,7 @@ class LMOptions:
     """
 
     max_iter: int = 100
-    mu0: float = 1e-3
+    mu0: float = TRAINLM_MU0
     mu_inc: float = 10.0
     mu_dec: float = 0.1
     mu_max: float = 1e10

@@ -28,9 +28,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..fit.damping import TRAINLM_MU0
 from ..fit.transforms import Bounds
 from ..network.runtime import CompiledNetwork
 from . import online_kernel as ok
+from .settings import ONLINE_TAU
 
 __all__ = ["OnlineOptions", "OnlineResult", "OnlineRun", "OnlineStart", "quasi_online", "STATUS_MESSAGES"]
 
@@ -74,7 +76,7 @@ class OnlineOptions:
     every: int = 1
     average: int = 25000
     start: int = 0
-    mu0: float = 1e-3
+    mu0: float = TRAINLM_MU0
     mu_inc: float = 10.0
     mu_dec: float = 0.1
     mu_max: float = 1e10
@@ -84,7 +86,7 @@ class OnlineOptions:
     chunk: int = 5000
     tries: int = 2
     min_block: int = 200
-    tau: float = 1.0
+    tau: float = ONLINE_TAU
 
     def __post_init__(self) -> None:
         for name, low in (("window", 1), ("every", 1), ("average", 1), ("start", 0), ("record_every", 1),
@@ -254,11 +256,11 @@ class OnlineRun:
         self.bounds = Bounds.make(names, lower, upper)
         self.bounds.check(x0, "theta0")
         self.x0 = x0
-        flat = compiled._flat
+        flat = compiled.flat
         self.program = ok.weight_program(compiled)
         prog = self.program
         self.state = ok.new_state(self.bounds.start(x0), prog.n_connections, prog.n_slots,
-                                  compiled._history(init), flat.ring, opt.window, compiled.n_outputs,
+                                  compiled.initial_history(init), flat.ring, opt.window, compiled.n_outputs,
                                   opt.average, opt.mu0, replay=opt.tries > 0)
         self._net = (flat.conn_ptr, flat.conn_kind, flat.conn_src, flat.conn_delay, flat.transfer,
                      compiled.weights.conn_slots, compiled.weights.slot_theta, flat.output_index)

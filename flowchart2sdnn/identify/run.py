@@ -46,7 +46,7 @@ from .result import (
     RecordInfo,
 )
 from .settings import MIN_REL_COST_CHANGE, IdentifySettings
-from .workers import fit_start, fit_task, online_start, run_online_start, run_start
+from .workers import fit_start, fit_task, quasi_online_start, run_quasi_online_start, run_start
 
 __all__ = ["IdentifySettings", "Identification", "identify"]
 
@@ -200,7 +200,7 @@ def _online(problem: Problem, x0, lower, upper, settings: IdentifySettings, prog
     n = settings.starts
 
     def run_one(start: np.ndarray, label: str = "quasi-online"):
-        return run_online_start(problem, start, lower, upper, opts,
+        return run_quasi_online_start(problem, start, lower, upper, opts,
                                 callback=lambda f: _online_tick(progress, stop, f, label))
 
     if n == 1:
@@ -214,7 +214,7 @@ def _online(problem: Problem, x0, lower, upper, settings: IdentifySettings, prog
         def fit_one(start: np.ndarray):
             return run_one(start, f"quasi-online, start {next(counter)}/{n}")
     else:
-        fit_one = functools.partial(online_start, fit_task(problem, lower, upper, opts))
+        fit_one = functools.partial(quasi_online_start, fit_task(problem, lower, upper, opts))
 
     def start_done(i, run):
         if progress:

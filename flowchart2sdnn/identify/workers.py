@@ -26,7 +26,8 @@ import numpy as np
 
 from ..fit.lm import LMResult, levenberg_marquardt
 
-__all__ = ["FitTask", "fit_task", "problem_of", "run_start", "fit_start", "run_online_start", "online_start"]
+__all__ = ["FitTask", "fit_task", "problem_of", "run_start", "fit_start", "run_quasi_online_start",
+           "quasi_online_start"]
 
 # Problems kept per worker process: a multi-start needs one, a batch worker moves from file to file.
 _CACHE_SIZE = 4
@@ -47,7 +48,7 @@ class FitTask:
                             alignment, the guard's stability floor, further records, ...), as identify built it
     names : tuple of str    theta order (checked against the rebuilt network)
     lower, upper : ndarray (P,) bounds
-    options : LMOptions (fit_start) or OnlineOptions (online_start)
+    options : LMOptions (fit_start) or OnlineOptions (quasi_online_start)
     key : str               sha256 of the network file and the problem fields: the worker's cache key
                             (bounds and options are not cached, they travel with every unit)
     """
@@ -136,7 +137,7 @@ def fit_start(task: FitTask, start: np.ndarray) -> LMResult:
     return run_start(problem_of(task), start, task.lower, task.upper, task.options)
 
 
-def run_online_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, options,
+def run_quasi_online_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, options,
                      callback: Callable | None = None):
     """Quasi-online identification from ``start`` (``options`` an OnlineOptions): the one way an online start
     runs, serial or in a worker. ``callback(fraction) -> bool`` reports progress and stops on True.
@@ -152,6 +153,6 @@ def run_online_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.nd
                                     callback=callback))
 
 
-def online_start(task: FitTask, start: np.ndarray):
-    """:func:`run_online_start` on the task's problem (``task.options`` an OnlineOptions; runs in any worker)."""
-    return run_online_start(problem_of(task), start, task.lower, task.upper, task.options)
+def quasi_online_start(task: FitTask, start: np.ndarray):
+    """:func:`run_quasi_online_start` on the task's problem (``task.options`` an OnlineOptions; runs in any worker)."""
+    return run_quasi_online_start(problem_of(task), start, task.lower, task.upper, task.options)

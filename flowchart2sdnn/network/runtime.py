@@ -274,7 +274,13 @@ class CompiledNetwork:
             )
         return u
 
-    def _history(self, init: Mapping[str, float] | None) -> np.ndarray:
+    @property
+    def flat(self) -> FlatNetwork:
+        """The flattened network the kernels walk (index arrays, ring buffer length, output rows)."""
+        return self._flat
+
+    def initial_history(self, init: Mapping[str, float] | None) -> np.ndarray:
+        """The delay ring buffer before the first sample: zeros, or the given initial outputs (name -> value)."""
         if init is not None:
             unknown = sorted(set(init) - set(self.output_names))
             if unknown:
@@ -286,7 +292,7 @@ class CompiledNetwork:
     # ------------------------------------------------------------------ running
     def _run(self, theta, inputs, init, record: np.ndarray) -> np.ndarray:
         u = self._check_inputs(inputs)
-        hist = self._history(init)
+        hist = self.initial_history(init)
         conn_val, _ = self._connection_values(theta, with_derivatives=False)
         f = self._flat
         return simulate_kernel(
@@ -321,7 +327,7 @@ class CompiledNetwork:
             ``dyhat[t, o, i] = d yhat[t, o] / d theta[i]``.
         """
         u = self._check_inputs(inputs)
-        hist = self._history(init)
+        hist = self.initial_history(init)
         conn_val, dval = self._connection_values(theta, with_derivatives=True)
         f = self._flat
         return jacobian_kernel(
