@@ -12,7 +12,7 @@ from collections.abc import Sequence
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.stats import t as student_t
+from scipy.special import stdtrit
 
 __all__ = ["Covariance", "covariance", "RANK_RTOL", "CORRELATION_LIMIT"]
 
@@ -220,7 +220,7 @@ def covariance(
     cov[:, bad] = np.nan
     stderr = np.sqrt(sigma2) * sd_unit
     stderr[bad] = np.inf
-    t95 = float(student_t.ppf(0.975, dof))
+    t95 = float(stdtrit(dof, 0.975))  # Student t quantile; scipy.special loads far faster than scipy.stats
     return Covariance(
         available=True,
         reason=None,
