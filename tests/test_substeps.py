@@ -223,6 +223,21 @@ def test_online_refuses_substeps():
         sd.identify(d, ds, online=True, window=50, average=50)
 
 
+def test_result_records_the_discretization():
+    import flowchart2sdnn as sd
+
+    d = load_diagram(DIAGRAMS / "three_mass.yaml")
+    data = excite(load_diagram(DIAGRAMS / "three_mass_plant.yaml"), ExcitationSettings(seconds=0.3, seed=1))
+    ds = sd.dataset_from_frame(__import__("pandas").DataFrame(data), time="time", inputs=["M1"],
+                               outputs=["w1", "w2", "w3"])
+    result = sd.identify(d, ds, max_iter=1)
+    n = compile_diagram(d).network.substeps
+    doc = __import__("json").loads(result.to_json())
+    assert doc["discretization"] == {"substeps": n, "requested": "auto", "sample_time": 0.001,
+                                     "step": pytest.approx(0.001 / n), "delays": "torques"}
+    assert result.chart.substeps == n  # the identified chart runs on the network it was fitted with
+
+
 # ------------------------------------------------------------------------------------------------ delays
 def test_torques_rule_delays_every_torque_into_a_speed_sum():
     d = load_diagram(DIAGRAMS / "three_mass_plant.yaml")
