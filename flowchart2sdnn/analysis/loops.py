@@ -10,6 +10,13 @@ neighbours nearest the inputs first and, among equals, farthest from the outputs
 back to a block still on the search path are the feedback edges. Forward paths from the inputs are explored
 first, so they never carry a delay; the keys depend on the chart's structure, not on the order of the YAML,
 and names only break exact structural ties.
+
+With `delays: torques` (the rule chosen for accuracy) every edge that closes a loop into a *speed sum* -- a
+sum that feeds an integrator through a gain, Newton's sum of torques before its 1/J -- is delayed first, and
+the search above breaks whatever loops remain. Speeds then follow from the previous step's torques and angles
+from the new speeds: symplectic Euler for every mass, where the search alone may delay a neighbour's speed
+instead (`w2 -> dw`), which lets a mass feel a shaft torque computed from a one-step-old neighbour and errs
+several times more on a chain of masses. The set is structural, so the choice still ignores the YAML order.
 """
 
 from __future__ import annotations
@@ -21,7 +28,7 @@ import networkx as nx
 from ..diagram.model import Diagram
 from .graph import algebraic_graph, chart_graph, delay_free_graph, distances
 
-__all__ = ["LoopReport", "analyse_loops", "find_algebraic_loops"]
+__all__ = ["LoopReport", "analyse_loops", "find_algebraic_loops", "torque_edges"]
 
 _KIND_RANK = {"input": 0, "constant": 1, "sum": 2, "gain": 3, "function": 4, "nonlinear": 5, "delay": 6,
               "integrator": 7}
@@ -60,26 +67,69 @@ def find_algebraic_loops(g: nx.DiGraph) -> list[tuple[str, ...]]:
     return loops
 
 
+def torque_edges(g: nx.DiGraph, h: nx.DiGraph) -> list[tuple[str, str]]:
+    """Edges of the delay-free graph `h` into a speed sum (see the module docstring)."""
+    kind = dict(g.nodes(data="kind"))
+    speed_sums = set()
+    for n in g:
+        if kind[n] != "integrator":
+            continue
+        gains, node, seen = 0, n, {n}
+        while True:  # walk the integrator's input back through gains: sum -> gain(1/J) -> integrator
+            preds = list(g.predecessors(node))
+            if len(preds) != 1 or preds[0] in seen:  # a loop of gains only is reported by the compiler
+                break
+            seen.add(preds[0])
+            node = preds[0]
+            if kind[node] != "gain":
+                break
+            gains += 1
+        if gains and kind[node] == "sum":
+            speed_sums.add(node)
+    return sorted((u, v) for v in speed_sums for u in h.predecessors(v))
+
+
+def _take_needed(h: nx.DiGraph, candidates: list[tuple[str, str]]) -> list[tuple[str, str]]:
+    """Remove from `h` (in place), in the given order, each candidate edge that still closes a loop; the removed.
+
+    One delay per loop: a loop through two speed sums (a motor's current and speed) delayed at both would be
+    explicit Euler, which pumps energy into the oscillation, so the second is left to the first.
+    """
+    taken = []
+    for u, v in candidates:
+        h.remove_edge(u, v)
+        if nx.has_path(h, v, u):
+            taken.append((u, v))
+        else:
+            h.add_edge(u, v)
+    return taken
+
+
 def analyse_loops(diagram: Diagram) -> LoopReport:
     g = chart_graph(diagram)
     algebraic = find_algebraic_loops(g)
-    h = delay_free_graph(g)
+    full = delay_free_graph(g)
+    candidates = torque_edges(g, full) if diagram.delays == "torques" else []
+    h = full.copy() if candidates else full
     inputs = [s.name for s in diagram.inputs if s.name in g]
-    din = distances(h, inputs)
-    dout = distances(h, [s.name for s in diagram.outputs if s.name in g], reverse=True)
+    din = distances(full, inputs)
+    dout = distances(full, [s.name for s in diagram.outputs if s.name in g], reverse=True)
     far = len(g) + 1
 
     def key(node: str):
         return (din.get(node, far), -dout.get(node, -1), _KIND_RANK.get(g.nodes[node]["kind"], 9),
-                h.in_degree(node), h.out_degree(node), node)
+                full.in_degree(node), full.out_degree(node), node)
 
+    # speed sums nearest the inputs first: the order is structural, so the choice ignores the YAML order
+    preferred = _take_needed(h, sorted(candidates, key=lambda e: (key(e[1]), key(e[0]))))
     succ = {n: sorted(h.successors(n), key=key) for n in h}  # every search visits neighbours in this order
+    succ_full = {n: sorted(full.successors(n), key=key) for n in full} if preferred else succ
     roots = sorted(inputs, key=key)
     roots += sorted((n for n in g if g.nodes[n]["kind"] == "constant"), key=key)
     roots += sorted(g, key=key)
 
     order: list[str] = []
-    back: list[tuple[str, str]] = []
+    back: list[tuple[str, str]] = list(preferred)
     state: dict[str, int] = {}  # 1 = on the search path, 2 = finished
     for root in roots:
         if root in state:
@@ -107,7 +157,7 @@ def analyse_loops(diagram: Diagram) -> LoopReport:
     for u, v in back:
         if any(u in loop and v in loop for loop in algebraic):
             continue  # reported as an algebraic loop; delaying it would hide the error
-        delayed.append((u, v, _shortest_path(succ, v, u)))
+        delayed.append((u, v, _shortest_path(succ_full, v, u)))
     return LoopReport(tuple(algebraic), tuple(delayed), tuple(order))
 
 

@@ -21,6 +21,8 @@ from .options import (
     max_iter_option,
     seed_option,
     settings_usage,
+    substeps_option,
+    with_substeps,
 )
 from .terminal import BatchBar
 
@@ -66,6 +68,7 @@ def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> li
 @max_iter_option("Safety limit on LM iterations: a fit stops when it has converged; one that reaches the "
                  "limit is reported as not converged.", default=1000)
 @alignment_option(None)
+@substeps_option()
 @map_option()
 @click.option("--retry-errors", is_flag=True, help="Redo files whose earlier row is an error.")
 @force_option("Start the results table over (it holds other settings).")
@@ -73,7 +76,7 @@ def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> li
               help="Also diagnose each file; the effects it adds (e.g. friction) go to the 'effects' column.")
 @click.option("--quiet", is_flag=True, help="No progress bar and no summary.")
 @handle_errors
-def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_iter, alignment, mapping,
+def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_iter, alignment, substeps, mapping,
           retry_errors, force, diagnose, quiet) -> None:
     """Identify CHART on every DATA file (paths, directories or quoted globs): one row per file in OUTPUT.
 
@@ -91,7 +94,7 @@ def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_i
         raise click.UsageError("give either --workers or --scheduler ADDRESS (--workers sizes only 'local')")
     files = expand_files(data, exclude=(output, f"{output}.lock"))
     check_output_path(output, [chart] + ([fix_from] if fix_from else []) + files, force=True)
-    diagram = load_diagram(chart)
+    diagram = with_substeps(load_diagram(chart), substeps)
     fixed: list[str] = []
     if fix_from:
         diagram, fixed = fix_from_result(diagram, fix_from)

@@ -21,6 +21,8 @@ from .options import (
     max_iter_option,
     seed_option,
     settings_usage,
+    substeps_option,
+    with_substeps,
 )
 from .terminal import Progress
 
@@ -83,6 +85,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 @click.option("--harmonics", default="1,2,3,4,6,8,12", show_default=True,
               help="cogging harmonics p to try.")
 @alignment_option()
+@substeps_option()
 @map_option()
 @seed_option("Seed for initial curves.")
 @force_option()
@@ -91,7 +94,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 @handle_errors
 def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
              refit_iter, max_iter, horizon, top, criterion, min_gain, alpha, dead_time_max, harmonics, alignment,
-             mapping, seed, force, quiet, workers=None, scheduler=None) -> None:
+             substeps, mapping, seed, force, quiet, workers=None, scheduler=None) -> None:
     """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
     chart, refit, and report the error before and after."""
     from ..atomic import atomic_write_text, check_output_path
@@ -127,7 +130,7 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     except ValueError as exc:
         raise click.UsageError(f"{effects_file}: {exc}") from None
     effects = select_effects(parse_effects(effect_names), library)
-    diagram = load_diagram(chart)
+    diagram = with_substeps(load_diagram(chart), substeps)
     maps = parse_mapping(mapping)
     cols = required_columns(diagram)
     train = [read_csv(d, cols, maps, diagram.sample_time) for d in data]

@@ -20,6 +20,8 @@ from .options import (
     max_iter_option,
     seed_option,
     settings_usage,
+    substeps_option,
+    with_substeps,
 )
 from .terminal import CtrlC, Progress
 
@@ -48,6 +50,7 @@ __all__ = ["identify"]
 @max_iter_option("Safety limit on LM iterations: a fit stops when it has converged; one that reaches the "
                  "limit is reported as not converged.", default=1000)
 @alignment_option()
+@substeps_option()
 @map_option()
 @click.option("--plots", type=click.Path(file_okay=False),
               help="Directory for the figures (PNG; created if needed, figures of the same name replaced). "
@@ -57,7 +60,7 @@ __all__ = ["identify"]
 @executor_options("the multi-start fits")
 @handle_errors
 def identify(data, chart, output, fix_from, validation, split, starts, seed, online, window, average,
-             max_iter, alignment, mapping, plots, force, quiet, workers=None, scheduler=None) -> None:
+             max_iter, alignment, substeps, mapping, plots, force, quiet, workers=None, scheduler=None) -> None:
     """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
     together, each simulated from its own initial state)."""
     from ..atomic import atomic_write_text, check_output_path
@@ -83,7 +86,7 @@ def identify(data, chart, output, fix_from, validation, split, starts, seed, onl
         chart_out = str(Path(output).with_suffix("")) + ".chart.yaml"
         check_output_path(output, inputs, force=force)
         check_output_path(chart_out, inputs, force=force)
-    diagram = load_diagram(chart)
+    diagram = with_substeps(load_diagram(chart), substeps)
     fixed = []
     if fix_from:
         diagram, fixed = fix_from_result(diagram, fix_from)

@@ -20,7 +20,16 @@ from ..errors import SdnnError
 from .batch import batch
 from .diagnose import diagnose
 from .identify import identify
-from .options import alignment_option, force_option, handle_errors, map_option, seed_option, settings_usage
+from .options import (
+    alignment_option,
+    force_option,
+    handle_errors,
+    map_option,
+    seed_option,
+    settings_usage,
+    substeps_option,
+    with_substeps,
+)
 from .report import report
 
 __all__ = ["main"]
@@ -62,9 +71,10 @@ def lint(chart: str, fmt: str) -> None:
 @click.option("--explain", is_flag=True, help="Print every weight as an equation and every delayed edge.")
 @click.option("--dot", type=click.Path(dir_okay=False), help="Write a Graphviz drawing of the network.")
 @seed_option("Seed for the initial learned weights.")
+@substeps_option()
 @force_option()
 @handle_errors
-def compile_(chart: str, output: str | None, explain: bool, dot: str | None, seed: int, force: bool) -> None:
+def compile_(chart: str, output: str | None, explain: bool, dot: str | None, seed: int, substeps, force: bool) -> None:
     """Compile CHART into a structured GDNN with administration matrices."""
     from ..atomic import atomic_write_text, check_output_path
     from ..compiler import compile_file
@@ -73,7 +83,7 @@ def compile_(chart: str, output: str | None, explain: bool, dot: str | None, see
     for path in (output, dot):
         if path:
             check_output_path(path, [chart], force=force)
-    comp = compile_file(chart, seed=seed)
+    comp = compile_file(chart, seed=seed, substeps=substeps)
     for w in comp.warnings:
         click.echo(w.one_line(), err=True)
     net = comp.network
@@ -83,6 +93,7 @@ def compile_(chart: str, output: str | None, explain: bool, dot: str | None, see
         atomic_write_text(dot, network_dot(net))
     if explain:
         click.echo(explain_network(net), nl=False)
+        click.echo("\n" + comp.substeps.explain(net.sample_time))
     elif not output and not dot:
         click.echo(net.to_json(), nl=False)
 
@@ -96,10 +107,11 @@ def compile_(chart: str, output: str | None, explain: bool, dot: str | None, see
 @click.option("--continuous", is_flag=True, help="Simulate the chart itself with a fine-step ODE solver.")
 @click.option("--signals", type=click.Choice(["outputs", "all"]), default="outputs", show_default=True)
 @alignment_option()
+@substeps_option()
 @map_option("Take chart signal NAME from COLUMN.")
 @force_option("Overwrite an existing output file.")
 @handle_errors
-def simulate(chart, data, output, params, continuous, signals, alignment, mapping, force) -> None:
+def simulate(chart, data, output, params, continuous, signals, alignment, substeps, mapping, force) -> None:
     """Run CHART on the inputs in DATA (CSV) and write time and output columns."""
     import numpy as np
 
@@ -110,7 +122,7 @@ def simulate(chart, data, output, params, continuous, signals, alignment, mappin
 
     if output:
         check_output_path(output, [chart, data] + ([params] if params else []), force=force)
-    diagram = load_diagram(chart)
+    diagram = with_substeps(load_diagram(chart), substeps)
     if params:
         from ..identify.document import apply_result_file
 

@@ -20,7 +20,7 @@ import click
 from ..errors import SdnnError
 
 __all__ = ["fail", "handle_errors", "settings_usage", "executor_options", "force_option", "seed_option",
-           "map_option", "alignment_option", "max_iter_option", "ALIGNMENT_HELP"]
+           "map_option", "alignment_option", "max_iter_option", "substeps_option", "with_substeps", "ALIGNMENT_HELP"]
 
 ALIGNMENT_HELP = "zoh: input sample k acts on [t_k, t_k+1) (logged data); direct: output k uses input k."
 
@@ -110,6 +110,41 @@ def alignment_option(help: str | None = ALIGNMENT_HELP):
     """``--alignment zoh|direct`` (default zoh); see network.alignment."""
     return click.option("--alignment", type=click.Choice(["zoh", "direct"]), default="zoh", show_default=True,
                         help=help)
+
+
+class _Substeps(click.ParamType):
+    """A whole number of network steps per sample (1 to MAX_SUBSTEPS), or ``auto``."""
+
+    name = "N|auto"
+
+    def convert(self, value, param, ctx):
+        from ..diagram.model import MAX_SUBSTEPS
+
+        if isinstance(value, int) or value == "auto":
+            return value
+        text = str(value).strip().lower()
+        if text == "auto":
+            return "auto"
+        if text.isdigit() and 1 <= int(text) <= MAX_SUBSTEPS:
+            return int(text)
+        self.fail(f"{value!r} is not a whole number from 1 to {MAX_SUBSTEPS} or 'auto'", param, ctx)
+
+
+def substeps_option():
+    """``--substeps N|auto``: network steps per data sample, overriding the chart's `substeps` (default: the
+    chart's; a chart without it runs one step per sample, the paper's network)."""
+    return click.option("--substeps", type=_Substeps(), default=None,
+                        help="network steps per sample, N or auto (overrides the chart's 'substeps'; "
+                             "without either: 1, the paper's network)")
+
+
+def with_substeps(diagram, substeps):
+    """The chart with the command line's --substeps applied (unchanged when not given)."""
+    if substeps is None:
+        return diagram
+    from dataclasses import replace
+
+    return replace(diagram, substeps=substeps)
 
 
 def max_iter_option(help: str | None = None, default: int = 100):

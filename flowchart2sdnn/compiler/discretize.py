@@ -7,7 +7,10 @@ Which blocks become neurons (the paper's summing junctions):
 - gain, delay and constant blocks are folded: a gain multiplies the connection's coefficient, a delay adds
   samples to its delay, a constant becomes a bias. A folded block that is a chart output gets a linear
   read-out neuron of its own.
-The feedback edges chosen by loop analysis add one sample of delay (explicit Euler in the feedback path).
+The feedback edges chosen by loop analysis add one step of delay (explicit Euler in the feedback path).
+
+With `substeps` N the network steps at h = T/N: integrator inputs carry h instead of T (T/J1 becomes h/J1) and a
+delay block of n samples becomes n*N steps, so the chart means the same in seconds; N = 1 is the paper's network.
 """
 
 from __future__ import annotations
@@ -82,7 +85,7 @@ def initial_nonlinear_weights(block: Block, seed: int, position: int) -> dict[st
     return {"a": a, "v": v, "b": b}
 
 
-def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0) -> DiscreteChart:
+def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int = 1) -> DiscreteChart:
     blocks = {b.name: b for b in diagram.blocks}
     inputs = set(diagram.input_names)
     delayed = loops.delayed
@@ -118,7 +121,7 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0) -> DiscreteCh
             factor = b.k if b.kind == "gain" else const(1.0)
             if term.sign < 0:
                 factor = neg(factor)
-            extra = b.n if b.kind == "delay" else 0
+            extra = b.n * substeps if b.kind == "delay" else 0
             signal, consumer, coef, delay = term.signal, b.name, mul(coef, factor), delay + extra
             if not isinstance(coef, Num) and len(folded) > MAX_FOLDED:
                 # the folded weight nests one level per gain; the network file must be able to read it back
@@ -137,7 +140,7 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0) -> DiscreteCh
 
     neuron_blocks: list[NeuronBlock] = []
     free: list[tuple[str, str, str, float, bool]] = []
-    T = const(diagram.sample_time)
+    T = const(diagram.sample_time / substeps)  # the step h; exactly T when substeps is 1
     for b in sorted(diagram.blocks, key=lambda b: rank.get(b.name, len(rank))):
         if b.kind == "sum":
             neuron_blocks.append(NeuronBlock(b.name, b.kind, ("linear",), (terms_of(b, const(1.0)),)))

@@ -48,7 +48,8 @@ def layer_order(chart: DiscreteChart, loops: LoopReport) -> list[NeuronBlock]:
     return [by_name[n] for n in nx.lexicographical_topological_sort(g, key=key)]
 
 
-def emit_network(diagram: Diagram, chart: DiscreteChart, loops: LoopReport, seed: int = 0) -> Network:
+def emit_network(diagram: Diagram, chart: DiscreteChart, loops: LoopReport, seed: int = 0,
+                 substeps: int = 1) -> Network:
     ordered = layer_order(chart, loops)
     layer_of = {nb.name: m for m, nb in enumerate(ordered)}
     input_index = {s.name: i for i, s in enumerate(diagram.inputs)}
@@ -97,6 +98,7 @@ def emit_network(diagram: Diagram, chart: DiscreteChart, loops: LoopReport, seed
         free_weights=free,
         initial_states=tuple(initial),
         delayed_edges=delayed,
+        substeps=substeps,
         source={
             "chart": diagram.name,
             "file": diagram.file,

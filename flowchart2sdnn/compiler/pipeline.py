@@ -16,10 +16,11 @@ from ..analysis.lint import lint_diagram
 from ..analysis.loops import LoopReport, analyse_loops
 from ..diagram.model import Diagram
 from ..diagram.validate import load_diagram
-from ..errors import Diagnostic, SdnnError
+from ..errors import Diagnostic, Location, SdnnError
 from ..network.model import Network
 from .discretize import DiscreteChart, discretize
 from .emit import emit_network
+from .substeps import AUTO_CAP, SubstepChoice, choose_substeps
 
 __all__ = ["Compilation", "compile_diagram", "compile_file"]
 
@@ -33,6 +34,7 @@ class Compilation:
     discrete: DiscreteChart
     network: Network
     warnings: tuple
+    substeps: SubstepChoice = SubstepChoice(1, None)
 
 
 @contextmanager
@@ -52,27 +54,44 @@ def _collector_paused() -> Iterator[None]:
             gc.enable()
 
 
-def compile_diagram(diagram: Diagram, seed: int = 0) -> Compilation:
-    """Lint, analyse loops, discretize and emit; SdnnError with the lint errors when the chart is unusable."""
+def compile_diagram(diagram: Diagram, seed: int = 0, substeps: int | str | None = None) -> Compilation:
+    """Lint, analyse loops, discretize and emit; SdnnError with the lint errors when the chart is unusable.
+
+    `substeps` (an int >= 1 or "auto") overrides the chart's `substeps` (see :mod:`.substeps`).
+    """
     with _collector_paused():
-        return _compile(diagram, seed)
+        return _compile(diagram, seed, substeps)
 
 
-def _compile(diagram: Diagram, seed: int) -> Compilation:
+def _compile(diagram: Diagram, seed: int, substeps: int | str | None = None) -> Compilation:
     diagnostics = lint_diagram(diagram)
     errors = [d for d in diagnostics if d.severity == "error"]
     if errors:
         raise SdnnError(errors)
     loops = analyse_loops(diagram)
-    discrete = discretize(diagram, loops, seed)
-    network = emit_network(diagram, discrete, loops, seed)
-    return Compilation(diagram, loops, discrete, network, tuple(d for d in diagnostics if d.severity != "error"))
+    built: dict[int, tuple[DiscreteChart, Network]] = {}
+
+    def build(n: int) -> Network:
+        if n not in built:
+            discrete = discretize(diagram, loops, seed, n)
+            built[n] = (discrete, emit_network(diagram, discrete, loops, seed, n))
+        return built[n][1]
+
+    choice, network = choose_substeps(diagram, build, substeps)
+    warnings = [d for d in diagnostics if d.severity != "error"]
+    if choice.capped:
+        warnings.append(Diagnostic(
+            "COMPILE010", "warning", f"substeps: auto wants more than {AUTO_CAP} steps per sample (fastest mode "
+            f"at rest {choice.omega_max:.4g} rad/s); using {AUTO_CAP}, so the discretization error may exceed "
+            "the auto target", Location(diagram.file, None),
+            hint="a steep curve at zero speed reads as a fast mode; or give substeps: N"))
+    return Compilation(diagram, loops, built[choice.substeps][0], network, tuple(warnings), choice)
 
 
-def compile_file(path: str | Path, seed: int = 0) -> Compilation:
-    """Load, validate and compile a chart file."""
+def compile_file(path: str | Path, seed: int = 0, substeps: int | str | None = None) -> Compilation:
+    """Load, validate and compile a chart file (`substeps` as in :func:`compile_diagram`)."""
     with _collector_paused():
-        return _compile(load_diagram(path), seed)
+        return _compile(load_diagram(path), seed, substeps)
 
 
 def check_file(path: str | Path) -> list[Diagnostic]:

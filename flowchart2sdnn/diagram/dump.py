@@ -60,6 +60,10 @@ def dump_diagram(diagram: Diagram, identified: Mapping | None = None) -> str:
     if diagram.description:
         doc["description"] = diagram.description
     doc["sample_time"] = _yaml_number(diagram.sample_time)
+    if diagram.substeps is not None:
+        doc["substeps"] = diagram.substeps
+    if diagram.delays is not None:
+        doc["delays"] = diagram.delays
 
     def signals(items):
         out = {}

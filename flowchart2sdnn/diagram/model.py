@@ -17,6 +17,8 @@ if TYPE_CHECKING:  # pragma: no cover
 
 __all__ = [
     "FORMAT_VERSION",
+    "MAX_SUBSTEPS",
+    "DELAY_RULES",
     "BLOCK_KINDS",
     "Signal",
     "Parameter",
@@ -27,6 +29,10 @@ __all__ = [
 ]
 
 FORMAT_VERSION = 1
+#: `substeps` may name at most this many network steps per sample (auto caps far lower, see compiler.substeps)
+MAX_SUBSTEPS = 1000
+#: `delays`: which feedback edges carry the one-step delay (see analysis.loops)
+DELAY_RULES = ("search", "torques")
 BLOCK_KINDS = ("sum", "gain", "integrator", "delay", "constant", "nonlinear", "function")
 FUNCTIONS = ("tanh", "sin", "cos", "sign_smooth", "sat")  # sat(z) = clip(z, -1, 1)
 
@@ -120,6 +126,10 @@ class Diagram:
     version: int = FORMAT_VERSION
     file: str = "<chart>"
     source_sha256: str | None = None
+    # network steps per sample: an int >= 1, "auto", or None (not given: 1, today's network)
+    substeps: int | str | None = None
+    # which feedback edges are delayed: "search" (None: the default) or "torques"
+    delays: str | None = None
     extra: dict = field(default_factory=dict, compare=False, hash=False)
 
     # --- look-ups (cheap; charts are small) ---

@@ -17,8 +17,10 @@ from ..errors import Diagnostic, Location, SdnnError, did_you_mean
 from ..expr import ExprError, parse_expr
 from .model import (
     BLOCK_KINDS,
+    DELAY_RULES,
     FORMAT_VERSION,
     FUNCTIONS,
+    MAX_SUBSTEPS,
     Block,
     Diagram,
     NonlinearWeights,
@@ -36,7 +38,8 @@ _YAML11_BOOLS = {"yes": True, "on": True, "no": False, "off": False}
 MAX_NEURONS = 100
 MAX_DELAY = 100_000
 
-TOP_KEYS = ("sdnn", "name", "description", "sample_time", "inputs", "outputs", "parameters", "blocks", "identified")
+TOP_KEYS = ("sdnn", "name", "description", "sample_time", "substeps", "delays", "inputs", "outputs", "parameters",
+            "blocks", "identified")
 SIGNAL_KEYS = ("unit", "description")
 PARAM_KEYS = ("init", "unit", "min", "max", "fixed", "description")
 COMMON_BLOCK_KEYS = ("type", "unit", "description")
@@ -146,6 +149,12 @@ class _Validator:
         elif not _is_number(ts) or not _finite_number(ts) or ts <= 0 or ts > 1e6:
             self.error("CHART004", f"'sample_time' must be a positive number of seconds, found {_show(ts)}", ("sample_time",))
             ts = 1.0
+        substeps = self.substeps(data)
+        delays = data.get("delays")
+        if "delays" in data and delays not in DELAY_RULES:
+            self.error("CHART004", f"'delays' must be one of {', '.join(DELAY_RULES)}, found {_show(delays)}",
+                       ("delays",), hint="torques: delay every torque where it enters a speed sum")
+            delays = None
         inputs = self.signals(data.get("inputs"), "inputs")
         outputs = self.signals(data.get("outputs"), "outputs")
         parameters = self.parameters(data.get("parameters"))
@@ -164,6 +173,8 @@ class _Validator:
             name=name.strip(),
             description=description,
             sample_time=float(ts),
+            substeps=substeps,
+            delays=delays,
             inputs=tuple(inputs),
             outputs=tuple(outputs),
             parameters=tuple(parameters),
@@ -172,6 +183,17 @@ class _Validator:
             source_sha256=sha256,
             extra={"identified": data.get("identified")} if "identified" in data else {},
         )
+
+    def substeps(self, data: Mapping) -> int | str | None:
+        """`substeps`: a whole number of network steps per sample (1 to MAX_SUBSTEPS) or `auto`."""
+        if "substeps" not in data:
+            return None
+        value = data["substeps"]
+        if value == "auto" or (isinstance(value, int) and not isinstance(value, bool) and 1 <= value <= MAX_SUBSTEPS):
+            return value
+        self.error("CHART004", f"'substeps' must be a whole number from 1 to {MAX_SUBSTEPS} or 'auto', found "
+                   f"{_show(value)}", ("substeps",), hint="network steps per sample: 1 is the paper's network")
+        return None
 
     def check_name(self, name, path: tuple, what: str) -> bool:
         if not isinstance(name, str) or not NAME_RE.match(name):

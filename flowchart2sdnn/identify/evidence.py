@@ -77,6 +77,13 @@ def no_excitation_message(problem: Problem) -> str:
             f"{why}; the start values are returned, nothing was identified")
 
 
+def _step_words(network) -> str:
+    """The step the chatter limit 2*J/h is about: the sample time, or the sub-step h = T/N."""
+    if network.substeps == 1:
+        return f"sample time T = {network.sample_time:g} s (limit about 2*J/T)"
+    return f"network step h = T/{network.substeps} = {network.step:g} s (limit about 2*J/h)"
+
+
 def start_stability(problem: Problem, x0: np.ndarray) -> tuple[Problem, list[str]]:
     """Check the start at rest. Chatter (a sign flip every sample) cannot be fitted away: an error. A start that
     drifts away from rest can: warn, and let the guard accept steps no worse than the start."""
@@ -86,8 +93,8 @@ def start_stability(problem: Problem, x0: np.ndarray) -> tuple[Problem, list[str
     if chatter > CHATTER_LIMIT:
         raise SdnnError.at(
             "FIT001", f"at its initial values (init) the chart's discrete network chatters at rest (eigenvalue "
-            f"{-chatter:.3f}): a curve in a feedback loop is too steep for the sample time "
-            f"T = {problem.network.sample_time:g} s (limit about 2*J/T)", problem.diagram.file,
+            f"{-chatter:.3f}): a curve in a feedback loop is too steep for the {_step_words(problem.network)}",
+            problem.diagram.file,
             hint="soften the curve (a larger eps of sign_smooth, a smaller k or init) or use a learned `nonlinear` block")
     if growth <= GROWTH_LIMIT:
         return problem, []

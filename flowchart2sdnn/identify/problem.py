@@ -114,9 +114,16 @@ class Problem:
         return es[0] if len(es) == 1 else np.concatenate(es)
 
     def stability(self, x: np.ndarray) -> tuple[float, float]:
-        """(chatter, growth) radii of the network linearized at rest (see network.stability.rest_radii)."""
+        """(chatter, growth) radii of the network linearized at rest (see network.stability.rest_radii).
+
+        Growth is per data sample (the step's radius to the power `substeps`), so GROWTH_LIMIT means 1 % a
+        sample whatever the step; chatter is per step (> 1 is > 1 in any power): with sub-steps the guard's
+        bound on a curve's slope at zero is 2*J/h.
+        """
         params, free = self.compiled.values(x)
-        return rest_radii(self.network, self.network.weight_values(params, free))
+        chatter, growth = rest_radii(self.network, self.network.weight_values(params, free))
+        n = self.network.substeps
+        return chatter, (growth if n == 1 else growth ** n)
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) of the free quantities: the parameters' min and max, unbounded where none is given
@@ -147,7 +154,8 @@ class Problem:
         chatter, growth = self.stability(x)
         if chatter > max(CHATTER_LIMIT, self.stability_floor[0]):
             return (f"the network would chatter at rest (eigenvalue {-chatter:.3f}): a curve in a feedback loop is "
-                    "steeper than the sample time allows (about 2*J/T)")
+                    + ("steeper than the sample time allows (about 2*J/T)" if self.network.substeps == 1
+                       else "steeper than the network step h allows (about 2*J/h)"))
         if growth > max(GROWTH_LIMIT, self.stability_floor[1]):
             return (f"the network would drift away from rest (eigenvalue {growth:.3f}): a curve in a feedback loop "
                     "has a negative slope at zero (it would feed energy in)")

@@ -102,6 +102,11 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
             raise ValueError("give either a validation record or a split, not both")
         train = full.slice(0, max(3, int(round(settings.split * train.n_rows))))
     problem = build_problem(diagram, train, settings.alignment, settings.seed, more=more)
+    if settings.online and problem.network.substeps > 1:
+        # the quasi-online kernel advances its window one network step per sample
+        raise SdnnError.at("FIT004", f"quasi-online identification runs one network step per sample, and this "
+                           f"chart asks for {problem.network.substeps} (substeps: {diagram.substeps})",
+                           diagram.file, hint="give --substeps 1 with --online, or identify offline")
     x0 = problem.compiled.theta0()
     problem, warnings = start_stability(problem, x0)
     lower, upper = problem.bounds()
@@ -147,7 +152,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
                 for b, c in curves.items()},
         fit=_fit(problem, x, settings, train, more, full, validation),
         warnings=tuple(warnings), settings=settings,
-        chart=with_values(diagram, params, curves),
+        chart=_resolved(with_values(diagram, params, curves), problem.network),
         source=ChartSource(diagram.name, diagram.file, diagram.source_sha256),
         data=DataInfo(_record(full if settings.split is not None else train),
                       tuple(_record(d) for d in ([full] if settings.split is not None else [train] + more)),
@@ -157,7 +162,20 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         multistart=out.multistart, uncertainty=evidence.uncertainty,
         online=_online_trace(out.online, problem.names, settings) if out.online is not None else None,
         problem=problem, x=x, lm=out.lm, online_run=out.online,
+        extra={"discretization": discretization(diagram, problem.network)},
     )
+
+
+def discretization(diagram, network) -> dict:
+    """RESULT.json's `discretization`: the sub-steps asked for and used, the step, the delay rule."""
+    return {"substeps": network.substeps, "requested": diagram.substeps, "sample_time": network.sample_time,
+            "step": network.step, "delays": diagram.delays or "search"}
+
+
+def _resolved(chart, network):
+    """The identified chart with `substeps: auto` replaced by the N that was fitted: auto depends on the
+    parameter values, and the identified values must run on the network they were fitted with."""
+    return replace(chart, substeps=network.substeps) if chart.substeps == "auto" else chart
 
 
 def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, progress, stop, executor) -> _Outcome:

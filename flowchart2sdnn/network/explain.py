@@ -21,7 +21,8 @@ def explain_network(net: Network) -> str:
     n_neurons = sum(la.size for la in net.layers)
     lines = [
         f"network {net.name}: {len(net.layers)} layers, {n_neurons} neurons, {len(net.inputs)} input(s), "
-        f"{len(net.weights)} weights, sample time T = {net.sample_time:g} s",
+        f"{len(net.weights)} weights, sample time T = {net.sample_time:g} s"
+        + (f", {net.substeps} steps per sample (h = {net.step:g} s; delays count steps)" if net.substeps > 1 else ""),
         "numbering as in the paper: layer m, neuron m.k, both from 1; LW{m,l}(d)[k,i] is the weight from neuron l.i "
         "delayed d samples to neuron m.k",
         "",

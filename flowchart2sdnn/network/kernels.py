@@ -144,16 +144,17 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
 
 @numba.njit(cache=True, fastmath=_FAST)
 def simulate_kernel(
-    inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, history, ring, record
+    inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, history, ring, record, stride=1
 ):
-    """Simulate the network; return the outputs of the neurons `record` over time, shape (Q, len(record)).
+    """Simulate the network; return the outputs of the neurons `record` at every `stride`-th step (the last
+    of each group: sub-steps), shape (Q // stride, len(record)).
 
     inputs (Q, R) float64; conn_* and transfer int64 (see :class:`.flat.FlatNetwork`); conn_val (C,) float64;
     history (N,) float64; ring int; record (K,) int64 global neuron indices.
     """
     n_steps = inputs.shape[0]
     n_neurons = transfer.shape[0]
-    out = np.empty((n_steps, record.shape[0]))
+    out = np.empty((n_steps // stride, record.shape[0]))
     a_buf = np.empty((ring, n_neurons))
     for s in range(ring):
         for k in range(n_neurons):
@@ -161,9 +162,11 @@ def simulate_kernel(
     slot_of = np.empty(ring, dtype=np.int64)
     for t in range(n_steps):
         simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, a_buf, slot_of)
+        if (t + 1) % stride != 0:
+            continue
         slot = t % ring
         for o in range(record.shape[0]):
-            out[t, o] = a_buf[slot, record[o]]
+            out[t // stride, o] = a_buf[slot, record[o]]
     return out
 
 
@@ -183,8 +186,9 @@ def jacobian_kernel(
     ring,
     record,
     n_theta,
+    stride=1,
 ):
-    """Outputs and their exact derivatives by RTRL.
+    """Outputs and their exact derivatives by RTRL, kept at every `stride`-th step as in :func:`simulate_kernel`.
 
     Extra arguments beyond :func:`simulate_kernel`: the sparse dw/dtheta of each connection in CSR form --
     entries ``dptr[c]:dptr[c + 1]`` of ``dtheta`` (theta index, int64) and ``dval`` (value, float64) -- and
@@ -192,14 +196,14 @@ def jacobian_kernel(
 
     Returns
     -------
-    y : (Q, K) float64
-    dy : (Q, K, P) float64
+    y : (Q // stride, K) float64
+    dy : (Q // stride, K, P) float64
     """
     n_steps = inputs.shape[0]
     n_neurons = transfer.shape[0]
     n_rec = record.shape[0]
-    y = np.empty((n_steps, n_rec))
-    dy = np.empty((n_steps, n_rec, n_theta))
+    y = np.empty((n_steps // stride, n_rec))
+    dy = np.empty((n_steps // stride, n_rec, n_theta))
     a_buf = np.empty((ring, n_neurons))
     for s in range(ring):
         for k in range(n_neurons):
@@ -210,10 +214,13 @@ def jacobian_kernel(
     for t in range(n_steps):
         rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
                   a_buf, s_buf, s_buf, False, slot_of, dn, dn)
+        if (t + 1) % stride != 0:
+            continue
         slot = t % ring
+        row = t // stride
         for o in range(n_rec):
             r = record[o]
-            y[t, o] = a_buf[slot, r]
+            y[row, o] = a_buf[slot, r]
             for p in range(n_theta):
-                dy[t, o, p] = s_buf[slot, r, p]
+                dy[row, o, p] = s_buf[slot, r, p]
     return y, dy

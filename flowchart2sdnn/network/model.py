@@ -12,6 +12,10 @@ readers; on load they are checked against it.
 
 History (values before the first sample): a neuron's output before t = 0 is its initial state (0 unless
 listed in `initial_states`); inputs before t = 0 are held at their first sample.
+
+Sub-steps: the network may step at h = sample_time / substeps (the weights carry h, a delay block of n samples
+is n * substeps steps); the runtime holds each input sample over its `substeps` steps and reads the outputs at
+the last one. `sample_time` stays the data's; the file records both and `step` = h.
 """
 
 from __future__ import annotations
@@ -155,6 +159,7 @@ class Network:
     free_weights: tuple[FreeWeightSpec, ...] = ()
     initial_states: tuple[InitialState, ...] = ()
     delayed_edges: tuple[DelayedEdge, ...] = ()
+    substeps: int = 1  # network steps per data sample
     source: Mapping = field(default_factory=dict, compare=False, hash=False)
 
     # ------------------------------------------------------------------ values
@@ -189,6 +194,11 @@ class Network:
                 value *= fv[w.free]
             out[j] = value
         return out
+
+    @property
+    def step(self) -> float:
+        """The network's time step h = sample_time / substeps (what the integrator weights carry)."""
+        return self.sample_time / self.substeps
 
     @property
     def max_delay(self) -> int:
@@ -237,6 +247,8 @@ class Network:
             "version": NETWORK_VERSION,
             "name": self.name,
             "sample_time": self.sample_time,
+            "substeps": self.substeps,
+            "step": self.step,
             "inputs": [asdict(i) for i in self.inputs],
             "layers": [
                 {"name": la.name, "block": la.block, "kind": la.kind, "neurons": [asdict(n) for n in la.neurons]}
@@ -284,6 +296,7 @@ class Network:
                 DelayedEdge(e["source"], e["target"], e["delay"], tuple(e.get("loop", ())))
                 for e in data.get("delayed_edges", ())
             ),
+            substeps=data.get("substeps", 1),  # files before sub-steps: one step per sample
             source=dict(data.get("source", {})),
         )
         net.verify()
@@ -300,6 +313,8 @@ class Network:
         """Raise ValueError when the network breaks an invariant the runtime relies on."""
         if not (self.sample_time > 0 and math.isfinite(self.sample_time)):
             raise ValueError("sample_time must be a positive number")
+        if not isinstance(self.substeps, int) or isinstance(self.substeps, bool) or self.substeps < 1:
+            raise ValueError(f"substeps must be a whole number >= 1, not {self.substeps!r}")
         nl = len(self.layers)
         free_names = {f.name for f in self.free_weights}
         for la in self.layers:

@@ -290,13 +290,27 @@ class CompiledNetwork:
         return self._flat.history_with(init)
 
     # ------------------------------------------------------------------ running
+    @property
+    def substeps(self) -> int:
+        """Network steps per input sample (the network file's `substeps`)."""
+        return self.net.substeps
+
+    def _steps(self, u: np.ndarray) -> np.ndarray:
+        """The input of every network step: each sample held over its `substeps` steps (zero-order hold).
+
+        The kernels keep the last step of each sample, so outputs, residuals and Jacobian rows exist only at
+        the data's samples while RTRL runs through every step.
+        """
+        return u if self.net.substeps == 1 else np.repeat(u, self.net.substeps, axis=0)
+
     def _run(self, theta, inputs, init, record: np.ndarray) -> np.ndarray:
-        u = self._check_inputs(inputs)
+        u = self._steps(self._check_inputs(inputs))
         hist = self.initial_history(init)
         conn_val, _ = self._connection_values(theta, with_derivatives=False)
         f = self._flat
         return simulate_kernel(
-            u, f.conn_ptr, f.conn_kind, f.conn_src, f.conn_delay, conn_val, f.transfer, hist, f.ring, record
+            u, f.conn_ptr, f.conn_kind, f.conn_src, f.conn_delay, conn_val, f.transfer, hist, f.ring, record,
+            self.net.substeps,
         )
 
     def simulate(self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None) -> np.ndarray:
@@ -326,7 +340,7 @@ class CompiledNetwork:
         dyhat : (Q, n_outputs, P) ndarray
             ``dyhat[t, o, i] = d yhat[t, o] / d theta[i]``.
         """
-        u = self._check_inputs(inputs)
+        u = self._steps(self._check_inputs(inputs))
         hist = self.initial_history(init)
         conn_val, dval = self._connection_values(theta, with_derivatives=True)
         f = self._flat
@@ -345,6 +359,7 @@ class CompiledNetwork:
             f.ring,
             f.output_index,
             self.n_theta,
+            self.net.substeps,
         )
 
     def signals(

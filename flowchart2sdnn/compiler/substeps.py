@@ -1,0 +1,106 @@
+"""How many network steps per data sample: `substeps: N` as given, or `auto` from the network's fastest mode.
+
+The paper's scheme (implicit Euler forward, one step of delay in every feedback loop) is first order: a mode of
+angular frequency w is carried with a phase and amplitude error of about w*h/2 per unit of its own amplitude.
+`auto` linearizes the compiled network at rest (:func:`flowchart2sdnn.network.stability.rest_eigenvalues`, the
+chatter guard's matrix), reads each eigenvalue z as a continuous rate |log z| / h, and picks the smallest N
+with w_max * T / N <= AUTO_BOUND. The bound is measured, not derived: on the two- and three-mass benches
+(`benchmarks/bench_substeps.py`, `delays: torques`) w*h <= 0.01 keeps every speed within 0.06 % of its RMS
+(0.0025 rad/s at most on speeds of 3-5 rad/s RMS); 0.02 left the three-mass motor speed at 0.13 %. N is capped at AUTO_CAP; when the cap binds
+(a steep friction curve at zero speed reads as a very fast mode) a warning says so.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..diagram.model import Diagram
+from ..network.model import Network
+from ..network.stability import rest_eigenvalues
+
+__all__ = ["AUTO_BOUND", "AUTO_CAP", "SubstepChoice", "fastest_mode", "choose_substeps"]
+
+#: auto keeps omega_max * h at or below this (rad per network step)
+AUTO_BOUND = 0.01
+#: auto never takes more steps per sample than this
+AUTO_CAP = 32
+#: eigenvalues of smaller modulus are not modes (see fastest_mode)
+ZERO_MODULUS = 1e-3
+
+
+@dataclass(frozen=True)
+class SubstepChoice:
+    """The sub-steps used and why: `requested` is the chart's or the caller's value (None: not given)."""
+
+    substeps: int
+    requested: int | str | None
+    omega_max: float | None = None  # rad/s, the fastest mode at rest (auto only)
+    capped: bool = False
+
+    def explain(self, sample_time: float) -> str:
+        h = sample_time / self.substeps
+        text = f"substeps N = {self.substeps} (h = T/N = {h:g} s)"
+        if self.requested == "auto":
+            w = self.omega_max or 0.0
+            text += (f", auto: fastest mode at rest {w:.4g} rad/s ({w / (2 * math.pi):.4g} Hz), "
+                     f"omega_max*h = {w * h:.3g} (bound {AUTO_BOUND:g}, cap {AUTO_CAP})")
+            if self.capped:
+                text += " -- the cap binds"
+        elif self.requested is None:
+            text += ", the default"
+        return text
+
+
+def fastest_mode(net: Network) -> float:
+    """The largest continuous-time rate |log z| / h (rad/s) among the network's eigenvalues at rest.
+
+    Eigenvalues below ZERO_MODULUS are skipped: the companion matrix's delay lines (a delayed sum's or a delay
+    block's memory) are zero eigenvalues that rounding spreads up to about 1e-5 (a defective block), and a mode
+    that decays a thousandfold in one step is gone before the next sample whatever its error. An eigenvalue on the negative real axis (a network that already chatters) reads as
+    pi / h, which asks for more steps, as it should.
+    """
+    z = rest_eigenvalues(net, net.weight_values())
+    z = z[np.abs(z) > ZERO_MODULUS]
+    if z.size == 0:
+        return 0.0
+    return float(np.max(np.abs(np.log(z.astype(complex))))) / net.step
+
+
+def substeps_for(omega: float, sample_time: float) -> tuple[int, bool]:
+    """(N, capped): the smallest N with omega * T / N <= AUTO_BOUND, at most AUTO_CAP."""
+    if not math.isfinite(omega):
+        return AUTO_CAP, True
+    need = max(1, math.ceil(omega * sample_time / AUTO_BOUND - 1e-9))
+    return min(need, AUTO_CAP), need > AUTO_CAP
+
+
+def requested_substeps(diagram: Diagram, override: int | str | None = None) -> int | str | None:
+    """The caller's value when given (the command line's --substeps), else the chart's."""
+    return override if override is not None else diagram.substeps
+
+
+def choose_substeps(diagram: Diagram, build, override: int | str | None = None) -> tuple[SubstepChoice, Network]:
+    """Resolve the sub-steps and return the network compiled with them.
+
+    `build(N)` compiles the chart at N sub-steps. For `auto` the fastest mode is read from the network at one
+    step per sample and again from the network at the chosen N (a coarse step distorts fast modes: implicit
+    Euler slows them), and the larger N of the two is kept.
+    """
+    requested = requested_substeps(diagram, override)
+    if requested != "auto":
+        n = 1 if requested is None else int(requested)
+        return SubstepChoice(n, requested), build(n)
+    net = build(1)
+    omega = fastest_mode(net)
+    n, capped = substeps_for(omega, diagram.sample_time)
+    if n > 1:
+        net = build(n)
+        omega = max(omega, fastest_mode(net))
+        n2, capped = substeps_for(omega, diagram.sample_time)
+        if n2 != n:
+            n = n2
+            net = build(n)
+    return SubstepChoice(n, requested, omega, capped), net
