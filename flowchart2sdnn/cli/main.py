@@ -17,6 +17,7 @@ import click
 
 from .. import __version__
 from .batch import batch
+from .compare import compare
 from .diagnose import diagnose
 from .identify import identify
 from .options import alignment_option, force_option, handle_errors, map_option, seed_option
@@ -172,5 +173,5 @@ def excite(plant, seconds, seed, output, amplitude, hold, relay_level, relay_swi
 
 
 # ------------------------------------------------------------------------------------------------ the rest
-for _command in (identify, diagnose, batch, report):
+for _command in (identify, diagnose, batch, report, compare):
     main.add_command(_command)
