@@ -20,6 +20,7 @@ from .batch import batch
 from .compare import compare
 from .diagnose import diagnose
 from .identify import identify
+from .linearize import linearize
 from .options import alignment_option, force_option, handle_errors, map_option, seed_option
 from .report import report
 
@@ -173,5 +174,5 @@ def excite(plant, seconds, seed, output, amplitude, hold, relay_level, relay_swi
 
 
 # ------------------------------------------------------------------------------------------------ the rest
-for _command in (identify, diagnose, batch, report, compare):
+for _command in (identify, diagnose, batch, report, compare, linearize):
     main.add_command(_command)

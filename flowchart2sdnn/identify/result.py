@@ -295,6 +295,19 @@ class Identification:
             write_compare(out, plot, self.chart.name if self.chart is not None else self.source.name)
         return out
 
+    def linearize(self, at: Mapping[str, float] | None = None, kink: str = "zero"):
+        """The identified chart's continuous state-space model at an operating point.
+
+        `at` gives states (integrators) and inputs their values (default 0); `kink` says how a Coulomb kink
+        (``sign_smooth``) is taken: "zero" (the sign function's slope) or "smooth" (the smoothed slope). See
+        :mod:`flowchart2sdnn.analysis.linearize`; ``.to_control()`` gives a python-control ``StateSpace``.
+        """
+        from ..analysis.linearize import linearize
+
+        if self.chart is None:
+            raise ValueError("this result has no chart to linearise (read the RESULT.json with its chart)")
+        return linearize(self.chart, at, kink)
+
     def to_document(self) -> dict:
         """The RESULT.json body, a new dict each call (see :mod:`flowchart2sdnn.identify.document`)."""
         from .document import to_document
