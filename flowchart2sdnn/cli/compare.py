@@ -11,7 +11,7 @@ import json
 import click
 
 from ..strictjson import strict_json
-from .options import force_option, handle_errors, map_option
+from .options import alignment_option, force_option, handle_errors, map_option
 
 __all__ = ["compare"]
 
@@ -26,8 +26,7 @@ __all__ = ["compare"]
               help="Write the figure (PNG; needs matplotlib: pip install flowchart2sdnn[plots]).")
 @click.option("--diagram", "chart", type=click.Path(dir_okay=False),
               help="With a RESULT.json: put its values into this chart instead of the identified chart beside it.")
-@click.option("--alignment", type=click.Choice(["zoh", "direct"]),
-              help="Input alignment (default: the fit's with a RESULT.json, else zoh).")
+@alignment_option("Input alignment (default: the fit's with a RESULT.json, else zoh).", default=None)
 @map_option()
 @click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text", show_default=True)
 @force_option("Overwrite an existing figure.")
