@@ -327,3 +327,22 @@ def test_diagnose_finds_the_friction_a_chart_lacks(fleet, tmp_path):
               BatchSettings(identify=FAST.identify, diagnose=True))
     row = read_results(out)[1][0]
     assert "friction" in row["effects"]
+
+
+def test_unconverged_fits_are_left_out_of_the_trends(tmp_path):
+    """Drive R's b falls 4 % a day; its last five days stopped at the iteration limit far above the truth, which
+    turns the trend around (a 'rising' drift when they are kept). Left out and listed, they cannot fake one."""
+    cols = columns_for(("b",), ("w1",))
+    lines = [",".join(cols.names)]
+    for day in range(10):
+        unconverged = day >= 5
+        v = 1.0 - 0.04 * day + (0.8 if unconverged else 0.0)
+        row = {"file": f"R_day{day}.csv", "sha256": "x", "status": "max_iter" if unconverged else "small_cost_change",
+               "b": repr(v), "b_lo": repr(v - 0.004), "b_hi": repr(v + 0.004), "config": "c"}
+        lines.append(",".join(row.get(c, "") for c in cols.names))
+    path = tmp_path / "t.csv"
+    path.write_text("\n".join(lines) + "\n")
+    fleet = load_fleet(path)
+    assert fleet.unconverged == tuple(f"R_day{k}.csv" for k in range(5, 10))
+    (d,) = drift_table(fleet)
+    assert d["drift"] == "falling" and d["slope_per_day"] == pytest.approx(-0.04, abs=1e-9)

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import dataclasses
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -146,3 +147,31 @@ def test_excite_errors():
         excite(plant, ExcitationSettings(seconds=1e-5))
     with pytest.raises(ValueError, match="noise_std"):
         excite(plant, ExcitationSettings(seconds=1.0, noise_std=-1.0))
+
+
+@pytest.mark.parametrize("args, code, words", [
+    (["--noise", "-1"], 2, "--noise` must be >= 0"),
+    (["--amplitude", "5", "-5"], 2, "--amplitude` must be (low, high) with low <= high"),
+    (["--hold", "0.5", "0.1"], 2, "--hold` must be 0 <= min <= max"),
+    (["--input", "Q"], 2, "'Q' is not an input of"),
+    (["--speed", "zz"], 1, "error[EXC001] relay measured signal 'zz' is not a chart signal"),
+    (["--hold", "0.0001", "0.0002"], 1, "contains no whole number of samples of 0.001 s"),
+])
+def test_bad_excitation_options_are_named_errors_not_internal_ones(tmp_path, args, code, words):
+    from click.testing import CliRunner
+
+    from flowchart2sdnn.cli import main
+
+    out = tmp_path / "x.csv"
+    plant = str(Path(__file__).resolve().parent.parent / "diagrams" / "two_mass_plant.yaml")
+    res = CliRunner().invoke(main, ["excite", plant, "--seconds", "0.1", "-o", str(out), *args])
+    assert res.exit_code == code, res.output
+    assert words in res.output and "internal error" not in res.output and "Traceback" not in res.output
+    assert not out.exists()
+
+
+def test_excitation_settings_refuse_bad_values_in_their_own_words():
+    with pytest.raises(ValueError, match="^`noise_std` must be >= 0"):
+        ExcitationSettings(seconds=1.0, noise_std=-0.1)
+    with pytest.raises(ValueError, match="finite"):
+        ExcitationSettings(seconds=float("nan"))

@@ -343,3 +343,4 @@ def test_arguments_are_validated():
     with pytest.raises(ValueError, match="residual changed length"):
         sizes = iter([5, 4, 4, 4])
         levenberg_marquardt(lambda p: (np.ones(k := next(sizes)), np.ones((k, 1))), [1.0], ["a"])
+

@@ -28,7 +28,7 @@ import numpy as np
 from ..errors import SdnnError
 from .results import read_results
 
-__all__ = ["DEFAULT_GROUP", "Point", "Fleet", "parse_group", "load_fleet", "drift_table", "effects_table",
+__all__ = ["DEFAULT_GROUP", "Point", "Fleet", "trusted", "UNCONVERGED_STATUSES", "parse_group", "load_fleet", "drift_table", "effects_table",
            "write_report", "plots_available"]
 
 _DAY = r"(?P<day>\d{4}-\d{2}-\d{2}|\d+)"
@@ -58,12 +58,15 @@ class Fleet:
     parameters : tuple of str   parameters that were identified (fixed ones are left out)
     errors : tuple of str       files whose row is an error
     unmatched : tuple of str    files whose name the grouping rule could not read
+    unconverged : tuple of str  files whose fit did not converge: left out of the trends (one such fit can
+                                fake or hide a drift)
     """
 
     drives: dict[str, tuple[Point, ...]]
     parameters: tuple[str, ...]
     errors: tuple[str, ...]
     unmatched: tuple[str, ...]
+    unconverged: tuple[str, ...] = ()
 
 
 def _day(text: str | None):
@@ -128,8 +131,9 @@ def load_fleet(path: str | os.PathLike, group: str | None = None) -> Fleet:
         if "drive" not in pattern.groupindex:
             raise SdnnError.at("REP001", "--group needs a named group (?P<drive>...) (and may have (?P<day>...))")
     header, rows, _ = read_results(name)
-    good = [r for r in rows if r.get("status") != "error"]
     errors = tuple(sorted(str(r["file"]) for r in rows if r.get("status") == "error"))
+    doubtful = tuple(sorted(str(r["file"]) for r in rows if r.get("status") != "error" and not trusted(r)))
+    good = [r for r in rows if r.get("status") != "error" and trusted(r)]
     drives: dict[str, list[Point]] = {}
     unmatched = []
     for r in good:
@@ -151,7 +155,16 @@ def load_fleet(path: str | os.PathLike, group: str | None = None) -> Fleet:
     if len(kinds) > 1:
         raise SdnnError.at("REP002", "some days are dates and some are numbers; give --group", name)
     ordered = {d: tuple(sorted(pts, key=lambda p: (p.x, str(p.row["file"])))) for d, pts in sorted(drives.items())}
-    return Fleet(ordered, _free_parameters(header, good), errors, tuple(sorted(unmatched)))
+    return Fleet(ordered, _free_parameters(header, good), errors, tuple(sorted(unmatched)), doubtful)
+
+
+#: Statuses of a fit that stopped before it converged (see fit.lm.CONVERGED_STATUSES for the others).
+UNCONVERGED_STATUSES = frozenset({"max_iter", "interrupted", "max_mu_tries", "callback_stop"})
+
+
+def trusted(row: dict) -> bool:
+    """Whether a results row's fit converged (its status is not one of :data:`UNCONVERGED_STATUSES`)."""
+    return row.get("status") not in UNCONVERGED_STATUSES
 
 
 def _trend(x: np.ndarray, y: np.ndarray) -> tuple[float, float, np.ndarray]:
@@ -404,6 +417,7 @@ def write_report(fleet: Fleet, drift: list[dict], directory: str | os.PathLike, 
     written.append(str(out / "drift.csv"))
     lines = ["# Fleet report", "", f"{sum(len(v) for v in fleet.drives.values())} identified files of "
              f"{len(fleet.drives)} drives; {len(fleet.errors)} error row(s); "
+             f"{len(fleet.unconverged)} fit(s) left out as not converged; "
              f"{len(fleet.unmatched)} file(s) without drive/day.", "", "## Drifting", ""]
     lines += [f"- drive {d['drive']}: {d['parameter']} {d['drift']} {d['change_percent']:+.1f} % "
               f"({d['first']:.4g} -> {d['last']:.4g}, days {d['first_day']}..{d['last_day']}, t = {d['t']:.1f})"

@@ -63,7 +63,8 @@ def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> li
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
               help="Multi-start per file (seeded starts, the first is the chart's init).")
 @seed_option()
-@max_iter_option()
+@max_iter_option("Safety limit on LM iterations: a fit stops when it has converged; one that reaches the "
+                 "limit is reported as not converged.", default=1000)
 @alignment_option(None)
 @map_option()
 @click.option("--retry-errors", is_flag=True, help="Redo files whose earlier row is an error.")

@@ -45,7 +45,8 @@ __all__ = ["identify"]
               help="Quasi-online window Q (samples).")
 @click.option("--average", type=click.IntRange(min=1), default=25000, show_default=True,
               help="Quasi-online: report the mean over the last K steps.")
-@max_iter_option()
+@max_iter_option("Safety limit on LM iterations: a fit stops when it has converged; one that reaches the "
+                 "limit is reported as not converged.", default=1000)
 @alignment_option()
 @map_option()
 @click.option("--plots", type=click.Path(file_okay=False),
@@ -133,6 +134,8 @@ def identify(data, chart, output, fix_from, validation, split, starts, seed, onl
         click.echo(format_result(outcome, fixed), nl=False)
         if output:
             click.echo(f"wrote {output} and {chart_out}")
+    if outcome.converged is False and outcome.status != "interrupted":
+        click.echo(f"warning: not converged: {outcome.message} (raise --max-iter, or start closer)", err=True)
     if outcome.status == "interrupted":
         click.echo(f"interrupted: {'the best result so far is in ' + output if output else 'no -o, nothing written'}",
                    err=True)

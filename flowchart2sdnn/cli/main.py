@@ -16,12 +16,13 @@ import sys
 import click
 
 from .. import __version__
+from ..errors import SdnnError
 from .batch import batch
 from .compare import compare
 from .diagnose import diagnose
 from .identify import identify
 from .linearize import linearize
-from .options import alignment_option, force_option, handle_errors, map_option, seed_option
+from .options import alignment_option, force_option, handle_errors, map_option, seed_option, settings_usage
 from .report import report
 
 __all__ = ["main"]
@@ -161,13 +162,20 @@ def excite(plant, seconds, seed, output, amplitude, hold, relay_level, relay_swi
     from ..simulate.excitation import ExcitationSettings
     from ..simulate.excitation import excite as run_excite
 
+    with settings_usage(noise_std="--noise"):
+        settings = ExcitationSettings(seconds=seconds, seed=seed, amplitude=tuple(amplitude), hold=tuple(hold),
+                                      relay_level=relay_level, relay_switch=relay_switch, relay_band=relay_band,
+                                      relay_band_scale=relay_band_scale, noise_std=noise_std, input=input_name,
+                                      speed=speed)
     check_output_path(output, [plant], force=force)
     diagram = load_diagram(plant)
-    settings = ExcitationSettings(seconds=seconds, seed=seed, amplitude=tuple(amplitude), hold=tuple(hold),
-                                  relay_level=relay_level, relay_switch=relay_switch, relay_band=relay_band,
-                                  relay_band_scale=relay_band_scale, noise_std=noise_std, input=input_name,
-                                  speed=speed)
-    columns = run_excite(diagram, settings, substeps=substeps)
+    if input_name is not None and input_name not in diagram.input_names:
+        raise click.BadParameter(f"'{input_name}' is not an input of {plant} ({', '.join(diagram.input_names)})",
+                                 param_hint="--input")
+    try:
+        columns = run_excite(diagram, settings, substeps=substeps)
+    except ValueError as exc:  # the chart cannot be simulated as asked (e.g. a hold shorter than a sample)
+        raise SdnnError.at("EXC001", str(exc), plant) from None
     write_csv(output, columns)
     n = len(columns["time"])
     click.echo(f"wrote {output}: {n} samples ({seconds:g} s at T = {diagram.sample_time:g} s), seed {seed}", err=True)

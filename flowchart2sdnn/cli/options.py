@@ -112,9 +112,9 @@ def alignment_option(help: str | None = ALIGNMENT_HELP, default: str | None = "z
                         show_default=default is not None, help=help)
 
 
-def max_iter_option(help: str | None = None):
-    """``--max-iter N`` (default 100): Levenberg-Marquardt iterations."""
-    return click.option("--max-iter", type=click.IntRange(min=0), default=100, show_default=True, help=help)
+def max_iter_option(help: str | None = None, default: int = 100):
+    """``--max-iter N``: Levenberg-Marquardt iterations (a safety limit where fits stop on convergence)."""
+    return click.option("--max-iter", type=click.IntRange(min=0), default=default, show_default=True, help=help)
 
 
 def executor_options(work: str):

@@ -45,6 +45,9 @@ def report(results, directory, group, threshold, t_min, ci_factor) -> None:
     n_files = sum(len(p) for p in fleet.drives.values())
     click.echo(f"{len(fleet.drives)} drive(s), {n_files} file(s), {len(fleet.errors)} error row(s); "
                f"wrote {len(written)} file(s) to {directory}")
+    if fleet.unconverged:
+        click.echo(f"warning: {len(fleet.unconverged)} fit(s) did not converge and are left out of the trends"
+                   f", e.g. '{fleet.unconverged[0]}'", err=True)
     if fleet.unmatched:
         click.echo(f"warning: {len(fleet.unmatched)} file name(s) give no drive and day, e.g. "
                    f"'{fleet.unmatched[0]}' (see --group)", err=True)

@@ -36,7 +36,8 @@ STATUS_MESSAGES: dict[str, str] = {
     "mu_max": "mu exceeded `mu_max`: no damped step lowers the cost (a local minimum, or rejected steps)",
     "max_mu_tries": "`max_mu_tries` increases of mu in a row did not find a step that lowers the cost",
     "small_step": "the relative step fell below `min_rel_step`",
-    "small_cost_change": "the relative decrease of the cost fell below `min_rel_cost_change`",
+    "small_cost_change": "the cost stopped falling: its relative decrease fell below `min_rel_cost_change` in one "
+                         "iteration, or below `stall_decrease` over the last `stall_iterations`",
     "callback_stop": "stopped by the callback",
     "interrupted": "interrupted (KeyboardInterrupt); the best point so far is returned",
 }
@@ -56,6 +57,10 @@ class LMOptions:
     (Madsen, Nielsen & Tingleff, *Methods for non-linear least squares problems*, 2004, section 3.2).
     trainlm's fixed ``mu0`` makes the first steps of a long record (diag(JᵀJ) of 1e6 and more) undamped
     Gauss-Newton steps that jump across narrow cost valleys; 0 keeps trainlm's behaviour.
+
+    ``stall_decrease`` > 0 ends a fit as converged ("small_cost_change") once the cost has fallen by less than that fraction of itself
+    over the last ``stall_iterations`` accepted iterations: one iteration's gain says little (a large mu makes
+    it small), ten in a row that together gain nothing that matters do.
     """
 
     max_iter: int = 100
@@ -67,6 +72,8 @@ class LMOptions:
     cost_goal: float = 0.0
     min_rel_step: float = 1e-12
     min_rel_cost_change: float = 0.0
+    stall_decrease: float = 0.0
+    stall_iterations: int = 10
     max_mu_tries: int = 20
     mu_min: float = 1e-20
     tau: float = 0.0
@@ -85,6 +92,7 @@ class LMOptions:
             "cost_goal",
             "min_rel_step",
             "min_rel_cost_change",
+            "stall_decrease",
             "mu_min",
             "tau",
         ):
@@ -100,7 +108,9 @@ class LMOptions:
         need(0 < self.mu_min <= self.mu0 <= self.mu_max, "need 0 < `mu_min` <= `mu0` <= `mu_max`")
         need(self.mu_inc > 1, f"`mu_inc` must be > 1, got {self.mu_inc}")
         need(0 < self.mu_dec < 1, f"`mu_dec` must be in (0, 1), got {self.mu_dec}")
-        for name in ("min_grad", "cost_goal", "min_rel_step", "min_rel_cost_change", "tau"):
+        need(isinstance(self.stall_iterations, int) and self.stall_iterations >= 1,
+             f"`stall_iterations` must be an int >= 1, got {self.stall_iterations!r}")
+        for name in ("min_grad", "cost_goal", "min_rel_step", "min_rel_cost_change", "stall_decrease", "tau"):
             need(getattr(self, name) >= 0, f"`{name}` must be >= 0, got {getattr(self, name)}")
 
 
@@ -360,6 +370,11 @@ def levenberg_marquardt(
                     status = "small_step"
                 elif 0 < opt.min_rel_cost_change and rel_decrease < opt.min_rel_cost_change:
                     status, detail = "small_cost_change", f"relative decrease {rel_decrease:.3g}"
+                elif 0 < opt.stall_decrease and len(costs) > opt.stall_iterations:
+                    gained = (costs[-opt.stall_iterations] - new_point.cost) / new_point.cost
+                    if gained < opt.stall_decrease:
+                        status = "small_cost_change"
+                        detail = f"{gained:.3g} of the cost over the last {opt.stall_iterations} iterations"
                 if callback is not None and status is None:
                     if callback(iteration + 1, new_point.x.copy(), new_point.cost, mu):
                         status = "callback_stop"

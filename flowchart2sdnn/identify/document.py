@@ -72,6 +72,7 @@ def to_document(ident: Identification) -> dict:
         "status": ident.status,
         "message": ident.message,
         "interrupted": bool(ident.interrupted),
+        "converged": ident.converged,
         "parameters": {n: {"value": e.value, "init": e.init, "stderr": e.stderr,
                            "ci95": None if e.ci95 is None else list(e.ci95), "unit": e.unit, "fixed": e.fixed}
                        for n, e in ident.parameters.items()},
@@ -125,7 +126,7 @@ def dumps(doc: dict) -> str:
 
 
 # ------------------------------------------------------------------------------------------------ reading
-_KNOWN = {"format", "version", "status", "message", "interrupted", "parameters", "nonlinear", "fit", "warnings",
+_KNOWN = {"format", "version", "status", "message", "interrupted", "converged", "parameters", "nonlinear", "fit", "warnings",
           "settings", "seed", "chart", "data", "versions", "optimizer", "multistart", "uncertainty", "online"}
 
 
@@ -163,6 +164,7 @@ def from_document(doc: dict, chart: Diagram | None = None) -> Identification:
     data = doc["data"]
     return Identification(
         status=doc["status"], message=doc["message"], interrupted=doc["interrupted"],
+        converged=doc.get("converged"),
         parameters={n: Estimate(_nan(p["value"]), _nan(p["init"]), p["stderr"], _tuple(p["ci95"]), p["unit"],
                                 p["fixed"]) for n, p in doc["parameters"].items()},
         curves={b: Curve(tuple(map(_nan, c["a"])), tuple(map(_nan, c["v"])),

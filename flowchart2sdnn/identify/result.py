@@ -175,8 +175,12 @@ class Identification:
 
     Attributes
     ----------
-    status, message : str        the optimizer's status word ("ok", "max_iter", "interrupted", ...) and sentence
+    status, message : str        the optimizer's status word ("small_cost_change", "max_iter", "interrupted",
+                                 ...) and sentence
     interrupted : bool           stopped early (Ctrl-C); the best point so far is reported
+    converged : bool or None     the offline fit reached a minimum (False: it stopped at the iteration limit or
+                                 was interrupted, and says so in ``warnings``); None where it does not apply
+                                 (quasi-online, nothing to fit, no excitation)
     parameters : {name: Estimate}   every chart parameter, fixed ones included, in chart order
     curves : {block: Curve}      the learned curves
     fit : Fit                    training and validation metrics
@@ -198,6 +202,7 @@ class Identification:
     status: str
     message: str
     interrupted: bool
+    converged: bool | None
     parameters: Mapping[str, Estimate]
     curves: Mapping[str, Curve]
     fit: Fit

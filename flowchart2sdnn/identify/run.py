@@ -28,7 +28,7 @@ from ..diagram.dump import with_values
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..executors import SerialExecutor
-from ..fit.lm import LMOptions, LMResult
+from ..fit.lm import CONVERGED_STATUSES, LMOptions, LMResult
 from ..fit.multistart import draw_starts, run_multistart
 from .evidence import assess, no_excitation_message, on_bound_warnings, start_stability
 from .problem import Problem, build_problem, combined_metrics, metrics
@@ -123,6 +123,10 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     evidence = assess(problem, x, diverged=status == "diverged_at_start")
     if evidence.no_excitation and not interrupted:  # nothing was identified: report the start values exactly
         status, message, x = "no_excitation", no_excitation_message(problem), x0
+    converged = None if out.lm is None or status == "no_excitation" else status in CONVERGED_STATUSES
+    if converged is False and not interrupted:
+        warnings.append(f"not converged: {message}; the parameters may be far from the minimum (raise max_iter, "
+                        "or start closer)")
     warnings.extend(evidence.warnings)
 
     params, _ = problem.compiled.values(x)
@@ -138,7 +142,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         parameters[p.name] = Estimate(float(params[p.name]), float(p.init), stderr, ci, p.unit, i is None)
 
     return Identification(
-        status=status, message=message, interrupted=bool(interrupted), parameters=parameters,
+        status=status, message=message, interrupted=bool(interrupted), converged=converged, parameters=parameters,
         curves={b: Curve(tuple(c["a"]), tuple(c["v"]), tuple(c["b"]) if "b" in c else None, c["fixed"])
                 for b, c in curves.items()},
         fit=_fit(problem, x, settings, train, more, full, validation),
@@ -157,7 +161,8 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
 
 
 def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, progress, stop, executor) -> _Outcome:
-    options = LMOptions(max_iter=settings.max_iter, min_rel_cost_change=MIN_REL_COST_CHANGE, tau=settings.lm_tau)
+    options = LMOptions(max_iter=settings.max_iter, min_rel_cost_change=MIN_REL_COST_CHANGE, tau=settings.lm_tau,
+                        stall_decrease=settings.converged_decrease / max(1, problem.n_residuals))
     starts = draw_starts(problem.names, x0, lower, upper, settings.starts, settings.seed,
                          ranges=settings.ranges or None)
     if executor is None:  # in this process: progress and Ctrl-C after every LM iteration

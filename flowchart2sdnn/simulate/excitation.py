@@ -48,6 +48,24 @@ class ExcitationSettings:
     input: str | None = None
     speed: str | None = None
 
+    def __post_init__(self) -> None:
+        def need(ok: bool, text: str) -> None:
+            if not ok:
+                raise ValueError(text)
+
+        finite = all(math.isfinite(float(v)) for v in (self.seconds, self.noise_std, self.relay_level,
+                                                        self.relay_switch, self.relay_band, self.relay_band_scale,
+                                                        *self.amplitude, *self.hold))
+        need(finite, "every excitation setting must be a finite number")
+        need(self.seconds > 0, f"`seconds` must be > 0, got {self.seconds}")
+        need(self.noise_std >= 0, f"`noise_std` must be >= 0, got {self.noise_std}")
+        need(len(self.amplitude) == 2 and self.amplitude[0] <= self.amplitude[1],
+             f"`amplitude` must be (low, high) with low <= high, got {tuple(self.amplitude)}")
+        need(len(self.hold) == 2 and 0 <= self.hold[0] <= self.hold[1],
+             f"`hold` must be 0 <= min <= max, got {tuple(self.hold)}")
+        need(self.relay_switch >= 0 and self.relay_band >= 0,
+             f"`relay_switch` and `relay_band` must be >= 0, got {self.relay_switch} and {self.relay_band}")
+
 
 def _hold_range(sample_time: float, hold: tuple[float, float]) -> tuple[int, int]:
     lo_s, hi_s = (float(h) for h in hold)
