@@ -17,7 +17,7 @@ PACKAGE = Path(__file__).resolve().parents[1] / "flowchart2sdnn"
 CLI = PACKAGE / "cli"
 LAG = Path(__file__).parent / "data" / "bad_identify" / "lag.yaml"
 
-COMMANDS = ["lint", "compile", "simulate", "excite", "identify", "diagnose", "batch", "report"]
+COMMANDS = ["lint", "compile", "simulate", "excite", "identify", "diagnose", "batch", "report", "compare", "linearize"]
 
 
 def test_the_group_has_every_command():
@@ -47,9 +47,10 @@ def test_shared_options_are_declared_once(flag):
 def test_force_seed_map_max_iter_are_where_they_were():
     has = {name: {o for p in command.params for o in p.opts} for name, command in main.commands.items()}
     assert {n for n in has if "--force" in has[n]} == {"compile", "simulate", "excite", "identify", "diagnose",
-                                                       "batch"}
+                                                       "batch", "compare", "linearize"}
     assert {n for n in has if "--seed" in has[n]} == {"compile", "excite", "identify", "diagnose", "batch"}
-    assert {n for n in has if "--map" in has[n]} == {"simulate", "identify", "diagnose", "batch"}
+    assert {n for n in has if "--map" in has[n]} == {"simulate", "identify", "diagnose", "batch", "compare",
+                                                     "linearize"}
     assert {n for n in has if "--max-iter" in has[n]} == {"identify", "diagnose", "batch"}
 
 

@@ -111,7 +111,7 @@ def test_cli_writes_the_augmented_chart_and_the_report(files):
             "--plots", str(files / "plots"), "--horizon", "250"]
     res = CliRunner().invoke(main, args)
     assert res.exit_code == 0, res.output
-    for png in ("residual_friction_v.png", "whiteness.png"):
+    for png in ("residual_friction_v.png", "whiteness.png", "resid_v.png"):
         assert (files / "plots" / png).read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
     assert "accepted: friction at v" in res.output and "final chart:" in res.output
     report = json.loads(rep.read_text())

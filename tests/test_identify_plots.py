@@ -47,7 +47,8 @@ def test_plots_offline_are_written_as_pngs(engine_csv, tmp_path):
                                     "--quiet"], catch_exceptions=False)
     assert res.exit_code == 0, res.output
     names = sorted(p.name for p in plots.iterdir())
-    assert names == ["curve_MR1.png", "output.png", "residual.png"]  # no parameter trajectories offline
+    # no parameter trajectories offline
+    assert names == ["compare.png", "curve_MR1.png", "output.png", "resid_w1.png", "residual.png"]
     for name in names:
         width, height = _png_size((plots / name).read_bytes())
         assert width >= 400 and height >= 250
@@ -69,7 +70,8 @@ def test_plots_online_include_parameter_trajectories(engine_csv, tmp_path):
     ds = read_csv(engine_csv, required_columns(diagram), None, diagram.sample_time)
     outcome = identify(diagram, ds, None, IdentifySettings(online=True, window=400, average=200))
     written = write_plots(outcome, tmp_path)
-    assert sorted(p.name for p in written) == ["curve_MR1.png", "output.png", "parameters.png", "residual.png"]
+    assert sorted(p.name for p in written) == ["curve_MR1.png", "output.png", "parameters.png",
+                                                      "resid_w1.png", "residual.png"]
     assert all(p.read_bytes()[:8] == PNG_MAGIC for p in written)
 
 

@@ -126,7 +126,13 @@ def identify(data, chart, output, fix_from, validation, split, starts, seed, onl
     if plots:
         from ..identify.plots import write_plots
 
-        write_plots(outcome, plots)
+        records = [(f"training: {Path(d.path).name}", d, 0) for d in train]
+        checks = [(f"validation: {Path(val.path).name}", val, 0)] if val is not None else []
+        if split:  # as identify splits: the free run over the whole record, shown and scored after the split
+            n = max(3, int(round(split * train[0].n_rows)))
+            records = [(records[0][0], train[0].slice(0, n), 0)]
+            checks = [(f"validation: {Path(train[0].path).name} after the split", train[0], n)]
+        write_plots(outcome, plots, records, checks)
     if not quiet:
         click.echo(format_result(outcome, fixed), nl=False)
         if output:

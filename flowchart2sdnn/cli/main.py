@@ -18,8 +18,10 @@ import click
 from .. import __version__
 from ..errors import SdnnError
 from .batch import batch
+from .compare import compare
 from .diagnose import diagnose
 from .identify import identify
+from .linearize import linearize
 from .options import (
     alignment_option,
     force_option,
@@ -192,5 +194,5 @@ def excite(plant, seconds, seed, output, amplitude, hold, relay_level, relay_swi
 
 
 # ------------------------------------------------------------------------------------------------ the rest
-for _command in (identify, diagnose, batch, report):
+for _command in (identify, diagnose, batch, report, compare, linearize):
     main.add_command(_command)

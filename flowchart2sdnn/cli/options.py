@@ -106,10 +106,10 @@ def map_option(help: str = "Take chart signal NAME from CSV column COLUMN (repea
     return click.option("--map", "mapping", multiple=True, metavar="NAME=COLUMN", help=help)
 
 
-def alignment_option(help: str | None = ALIGNMENT_HELP):
-    """``--alignment zoh|direct`` (default zoh); see network.alignment."""
-    return click.option("--alignment", type=click.Choice(["zoh", "direct"]), default="zoh", show_default=True,
-                        help=help)
+def alignment_option(help: str | None = ALIGNMENT_HELP, default: str | None = "zoh"):
+    """``--alignment zoh|direct`` (default zoh; None: the command chooses, e.g. the fit's); see network.alignment."""
+    return click.option("--alignment", type=click.Choice(["zoh", "direct"]), default=default,
+                        show_default=default is not None, help=help)
 
 
 class _Substeps(click.ParamType):

@@ -4,8 +4,9 @@ For every accepted effect, ``residual_<effect>_<at>.png`` shows, per output, the
 simulated, training record) of the chart as given (left) and of the final chart (right) against the signal
 the effect attaches to (a speed for friction, an input for a dead time, ...): a friction curve shows up as
 a step at zero speed on the left and is gone on the right. ``whiteness.png`` shows the residual
-autocorrelation before and after with the 99 % band. Written like the identify figures: an Agg canvas per
-figure, rendered to bytes and written atomically.
+autocorrelation before and after with the 99 % band; ``resid_<output>.png`` the residual analysis of the final
+chart (autocorrelation and cross-correlation with each input, 99 % band; see identify.figures). Written like
+the identify figures: an Agg canvas per figure, rendered to bytes and written atomically.
 """
 
 from __future__ import annotations
@@ -17,6 +18,8 @@ import numpy as np
 
 from ..atomic import atomic_write_bytes
 from ..data.csvdata import Dataset
+from ..identify.compare import signal_units
+from ..identify.figures import write_resid
 from ..identify.problem import build_problem
 from .loop import Diagnosis, Fitted
 
@@ -64,6 +67,7 @@ def write_plots(diagnosis: Diagnosis, train: Dataset, directory: str | Path) -> 
         train = train.slice(0, max(3, int(round(settings["split"] * train.n_rows))))
     e0, _, names = _traces(diagnosis.nominal, train, alignment, seed)
     e1, s1, _ = _traces(diagnosis.final, train, alignment, seed)
+    inputs = list(diagnosis.final.diagram.input_names)
     first = 1 if alignment == "zoh" else 0
     measured = {n: np.asarray(train.columns[n])[first:] for n in names}  # outputs on the fitted rows
     written = []
@@ -95,9 +99,13 @@ def write_plots(diagnosis: Diagnosis, train: Dataset, directory: str | Path) -> 
                 s = w[key]["autocorrelation"][out]
                 ax.plot(s["lags"], s["r"], "o-", ms=3, color=color, label=key)
             band = w["after"]["bound"]
-            ax.axhspan(-band, band, color="0.85")
+            ax.axhspan(-band, band, color="0.85", label=f"{100 * w['after']['level']:g} % band ±{band:.3g}")
             ax.set_xlabel("lag (samples)")
             ax.set_ylabel(f"autocorrelation {out}")
-            ax.legend(fontsize=8)
+            ax.legend(fontsize=8, loc="upper right")
         written.append(_save(fig, directory / "whiteness.png"))
+    if e1 is not None:  # MATLAB's resid figure of the final chart, one per output
+        u = np.column_stack([s1[n] for n in inputs])
+        written += write_resid(e1, u, names, inputs, directory, "final chart, training record",
+                               signal_units(diagnosis.final.diagram))
     return written

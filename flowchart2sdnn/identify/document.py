@@ -35,7 +35,7 @@ from .result import (
 from .settings import IdentifySettings
 
 __all__ = ["to_document", "from_document", "dumps", "read_result", "load_result", "apply_result_file",
-           "fix_from_result", "RESULT_FORMAT", "RESULT_VERSION"]
+           "fix_from_result", "read_model", "RESULT_FORMAT", "RESULT_VERSION"]
 
 RESULT_FORMAT = "sdnn-result"
 RESULT_VERSION = 1
@@ -200,6 +200,44 @@ def from_document(doc: dict, chart: Diagram | None = None) -> Identification:
 def read_result(path: str | Path, chart: Diagram | None = None) -> Identification:
     """Read a RESULT.json written by `sdnn identify` as an :class:`Identification`."""
     return from_document(load_result(path), chart)
+
+
+def _chart_beside(path: str | Path, data: dict) -> Diagram | None:
+    """The identified chart a result names, or the one written beside it (RESULT.chart.yaml), or None."""
+    from ..diagram.validate import load_diagram
+
+    # beside the result first: the key holds the path as given on the command line, from wherever that ran
+    candidates = [Path(path).with_name(Path(path).stem + ".chart.yaml")]
+    named = data.get("identified_chart")
+    if isinstance(named, str) and named:
+        candidates += [Path(path).parent / Path(named).name, Path(named)]
+    for candidate in candidates:
+        if candidate.is_file():
+            return load_diagram(candidate)
+    return None
+
+
+def read_model(path: str | Path, chart: str | Path | None = None) -> tuple[Diagram, Identification | None]:
+    """The identified chart of a RESULT.json (with the result), or a chart file as it is (and None).
+
+    A result's chart is the identified chart written beside it (``RESULT.chart.yaml``, or the file its
+    ``identified_chart`` key names); with `chart` given, that chart with the result's values instead.
+    """
+    from ..diagram.validate import load_diagram
+
+    name = str(path)
+    if Path(name).suffix.lower() != ".json":
+        return load_diagram(name), None
+    data = load_result(name)
+    if chart is not None:
+        diagram = apply_result_file(load_diagram(chart), name)
+    else:
+        diagram = _chart_beside(name, data)
+        if diagram is None:
+            raise SdnnError.at("RES006", "the identified chart beside this result is missing (expected "
+                               f"{Path(name).stem}.chart.yaml next to it)", name,
+                               hint="give the chart with --diagram, or pass RESULT.chart.yaml itself")
+    return diagram, from_document(data, diagram)
 
 
 def load_result(path: str | Path) -> dict:

@@ -5,6 +5,11 @@ What is drawn (file names in DIR):
 - ``output.png`` (Fig. 8): measured and model output per output over the training record (free run with
   the identified values) and, below, the cost: per LM iteration offline, the window cost over time online.
 - ``residual.png``: measured minus model output over time, per output.
+- ``compare.png``: measured and model output (free run) for every training and validation record, fit % and
+  RMS in the legend, units from the chart, a zoom on the largest error (:func:`.figures.compare_figure`).
+- ``resid_<output>.png`` (training record) and ``resid_validation_<output>.png`` (the validation record, when
+  there is one): residual autocorrelation and cross-correlation with each input, 99 % band
+  (:func:`.figures.resid_figure`).
 - ``parameters.png`` (Fig. 9, online mode only): the physical parameters over time.
 - ``curve_<block>.png`` (Figs. 7 and 10): each learned curve y = sum_i v_i tanh(a_i x + b_i) over the range
   of the signal that feeds the block during the record (the range is shaded).
@@ -16,14 +21,13 @@ each figure is rendered by its own Agg canvas to bytes and written with
 
 from __future__ import annotations
 
-import io
 import re
 from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write_bytes
 from ..errors import SdnnError
+from .canvas import new_figure, save_png
 
 __all__ = ["require_matplotlib", "write_plots", "curve_input_range"]
 
@@ -43,21 +47,12 @@ def require_matplotlib() -> None:
 
 
 def _figure(rows: int, width: float = 9.0, height: float = 2.4):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(width, max(3.0, height * rows)), dpi=100, layout="constrained")
-    FigureCanvasAgg(fig)
-    axes = fig.subplots(rows, 1, squeeze=False)[:, 0]
-    return fig, axes
+    fig, axes = new_figure(rows, 1, width, height)
+    return fig, axes[:, 0]
 
 
 def _save(fig, path: Path) -> Path:
-    buffer = io.BytesIO()
-    # no Software/date metadata: the same run gives the same bytes
-    fig.savefig(buffer, format="png", metadata={"Software": None})
-    atomic_write_bytes(path, buffer.getvalue())
-    return path
+    return save_png(fig, path)
 
 
 def _times(outcome) -> np.ndarray:
@@ -223,7 +218,14 @@ def _plot_curve(outcome, block: str, weights, directory: Path) -> Path:
     return _save(fig, directory / f"curve_{safe}.png")
 
 
-def write_plots(outcome, directory: str | Path) -> list[Path]:
+def _resid_inputs(data, names, rows: int, alignment: str) -> np.ndarray:
+    """The inputs acting on the last `rows` rows of `data` (zoh: input k-1 acts on row k)."""
+    u = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in names])
+    shift = 1 if alignment == "zoh" else 0
+    return u[data.n_rows - rows - shift:data.n_rows - shift]
+
+
+def write_plots(outcome, directory: str | Path, records=(), validation=()) -> list[Path]:
     """Draw the figures of an identification into `directory` (created if needed); return the files written.
 
     Parameters
@@ -232,18 +234,26 @@ def write_plots(outcome, directory: str | Path) -> list[Path]:
         What :func:`flowchart2sdnn.identify.run.identify` returned.
     directory : str or Path
         Existing PNGs of the same names are replaced (atomically).
+    records, validation : sequences of (label, Dataset, score_from), optional
+        The training and validation records to compare the model with in ``compare.png`` (rows before
+        `score_from` are run but not shown: a validation after a split). Without them no compare.png.
 
     Returns
     -------
     list of Path
-        ``output.png``, ``residual.png``, ``parameters.png`` (online mode), one ``curve_<block>.png`` per
-        learned curve.
+        ``output.png``, ``residual.png``, ``compare.png`` (every record, see :mod:`.figures`),
+        ``resid_<output>.png`` (residual analysis on the training record) and
+        ``resid_validation_<output>.png`` (on the first validation record, when there is one),
+        ``parameters.png`` (online mode), one ``curve_<block>.png`` per learned curve.
 
     Raises
     ------
     SdnnError
         PLOT001 when matplotlib is missing, PLOT002 when the directory cannot be created.
     """
+    from .compare import compare_records, signal_units
+    from .figures import write_compare, write_resid
+
     require_matplotlib()
     directory = Path(directory)
     try:
@@ -258,6 +268,18 @@ def write_plots(outcome, directory: str | Path) -> list[Path]:
     y = problem.targets
     t = _times(outcome)
     written = [_plot_output(outcome, t, y, yhat, names, directory), _plot_residual(t, y, yhat, names, directory)]
+    inputs = list(problem.compiled.input_names)
+    units = signal_units(outcome.diagram)
+    written += write_resid(y - yhat, problem.inputs, names, inputs, directory, "training", units)
+    every = [*records, *validation]
+    if every:
+        comparison = compare_records(problem.compiled, outcome.x, every, problem.alignment, None, outcome.diagram)
+        written.append(write_compare(comparison, directory / "compare.png", outcome.diagram.name))
+        if validation:
+            rec, (label, data, _) = comparison.records[len(records)], validation[0]
+            e = np.column_stack([rec.measured[n] - rec.model[n] for n in names])
+            u = _resid_inputs(data, inputs, rec.rows, problem.alignment)
+            written += write_resid(e, u, names, inputs, directory, label, units, prefix="resid_validation")
     params_png = _plot_parameters(outcome, directory)
     if params_png is not None:
         written.append(params_png)

@@ -243,22 +243,75 @@ class Identification:
             "zoh" or "direct"; default the one of the fit.
         """
         from ..network.alignment import run_aligned
-        from ..network.runtime import CompiledNetwork
         from .problem import data_init, network_input_names
 
-        if self.problem is not None and self.x is not None:
-            compiled, x = self.problem.compiled, self.x
-        else:
-            if self.chart is None:
-                raise ValueError("this result has no chart to simulate (read the RESULT.json with its chart)")
-            from ..compiler import compile_diagram
-
-            compiled = CompiledNetwork(compile_diagram(self.chart))
-            x = compiled.theta0()
+        compiled, x = self._network()
         net = compiled.net
         u = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in network_input_names(net)])
         y = run_aligned(compiled, x, u, alignment or self.settings.alignment, data_init(net, data))
         return {name: y[:, i] for i, name in enumerate(compiled.output_names)}
+
+    def _network(self):
+        """(compiled network, theta) of the identified model: the fit's own, else compiled from the chart."""
+        if self.problem is not None and self.x is not None:
+            return self.problem.compiled, self.x
+        if self.chart is None:
+            raise ValueError("this result has no chart to simulate (read the RESULT.json with its chart)")
+        from ..compiler import compile_diagram
+        from ..network.runtime import CompiledNetwork
+
+        compiled = CompiledNetwork(compile_diagram(self.chart).network)
+        return compiled, compiled.theta0()
+
+    def compare(self, data, horizon: int | None = None, plot=None, alignment: str | None = None):
+        """Measured against model output on records: fit % and RMS per record and output, drawn on request.
+
+        Parameters
+        ----------
+        data : Dataset, sequence of Dataset, or {label: Dataset}
+            Records with the chart's input and output columns (labelled by file name unless a mapping).
+        horizon : int, optional
+            None: free run; k: k-step-ahead prediction (restarts from the measured outputs every k samples,
+            see :mod:`flowchart2sdnn.identify.compare`).
+        plot : str or Path, optional
+            Also draw the comparison (one PNG, every record; needs matplotlib) into this file.
+        alignment : str, optional
+            "zoh" or "direct"; default the one of the fit.
+
+        Returns
+        -------
+        Comparison
+            ``.records[i].fit_percent[output]``, ``.rms[output]``, the traces; ``.table()`` as rows.
+        """
+        from pathlib import Path
+
+        from .compare import compare_records
+
+        if isinstance(data, Mapping):
+            records = [(str(label), d, 0) for label, d in data.items()]
+        else:
+            items = [data] if hasattr(data, "columns") and hasattr(data, "n_rows") else list(data)
+            records = [(Path(d.path).name, d, 0) for d in items]
+        compiled, x = self._network()
+        out = compare_records(compiled, x, records, alignment or self.settings.alignment, horizon, self.chart)
+        if plot is not None:
+            from .figures import write_compare
+
+            write_compare(out, plot, self.chart.name if self.chart is not None else self.source.name)
+        return out
+
+    def linearize(self, at: Mapping[str, float] | None = None, kink: str = "zero"):
+        """The identified chart's continuous state-space model at an operating point.
+
+        `at` gives states (integrators) and inputs their values (default 0); `kink` says how a Coulomb kink
+        (``sign_smooth``) is taken: "zero" (the sign function's slope) or "smooth" (the smoothed slope). See
+        :mod:`flowchart2sdnn.analysis.linearize`; ``.to_control()`` gives a python-control ``StateSpace``.
+        """
+        from ..analysis.linearize import linearize
+
+        if self.chart is None:
+            raise ValueError("this result has no chart to linearise (read the RESULT.json with its chart)")
+        return linearize(self.chart, at, kink)
 
     def to_document(self) -> dict:
         """The RESULT.json body, a new dict each call (see :mod:`flowchart2sdnn.identify.document`)."""

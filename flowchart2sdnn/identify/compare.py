@@ -1,0 +1,167 @@
+"""Measured against model output, record by record: the numbers behind `sdnn compare` and ``--plots``.
+
+Free run: the identified network driven by the record's inputs from its initial state, as the fit scores it.
+
+k-step-ahead prediction (``horizon = k``): the network's steps over the record are cut into consecutive
+segments of k steps. The first segment starts from the model's initial state, as the free run does. Every
+later segment restarts from the model's own state at the end of the previous segment, except that the value
+of every output neuron is replaced by the measured output of that row; then it runs free for k steps. A
+sample j steps after a restart is therefore a j-step-ahead prediction (j = 1..k), and every row is predicted
+at most k steps ahead. With outputs that are integrator states (the speeds of a drive) this resets the
+measured states; states that are not measured (the twist of a shaft) are carried on by the model, never
+estimated from data (there is no observer). ``horizon=1`` predicts each row from the measured row before it;
+a horizon as long as the record is the free run. With delays of more than one sample in the chart, the older
+samples of a restart's history repeat its last one (the network's history before a run is one vector).
+
+Fit % is 100 (1 - ||y - yhat|| / ||y - mean(y)||) and RMS the root mean square of y - yhat over the scored
+rows: the numbers of ``identify``'s fit table (:func:`flowchart2sdnn.identify.problem.metrics`), which they
+equal for the free run.
+"""
+
+from __future__ import annotations
+
+from collections.abc import Mapping, Sequence
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..data.csvdata import Dataset
+from ..diagram.model import Diagram
+from ..errors import SdnnError
+from ..network.alignment import fitted_rows, history_outputs, network_inputs, run_aligned
+from ..network.kernels import simulate_kernel
+from ..network.runtime import CompiledNetwork
+from ..strictjson import finite_or_none
+from .problem import data_init, network_input_names
+
+__all__ = ["RecordComparison", "Comparison", "predict", "compare_records", "signal_units"]
+
+
+@dataclass(frozen=True, eq=False)
+class RecordComparison:
+    """One record: the scored rows' time, measured and model outputs, and RMS / fit % / largest error per output.
+
+    ``model`` holds NaN where the simulation diverged (then the metrics are None).
+    """
+
+    label: str
+    path: str
+    rows: int
+    time: np.ndarray
+    measured: Mapping[str, np.ndarray]
+    model: Mapping[str, np.ndarray]
+    rms: Mapping[str, float | None]
+    fit_percent: Mapping[str, float | None]
+    max_error: Mapping[str, float | None]
+
+
+@dataclass(frozen=True, eq=False)
+class Comparison:
+    """Every record compared; ``horizon`` None for the free run; ``units`` output (and input) name -> unit."""
+
+    records: tuple[RecordComparison, ...]
+    horizon: int | None
+    outputs: tuple[str, ...]
+    units: Mapping[str, str | None]
+
+    def table(self) -> list[dict]:
+        """One row per record and output: label, output, fit %, RMS, largest |error|, unit, rows."""
+        return [{"record": r.label, "output": name, "fit_percent": r.fit_percent[name], "rms": r.rms[name],
+                 "max_error": r.max_error[name], "unit": self.units.get(name), "rows": r.rows}
+                for r in self.records for name in self.outputs]
+
+
+def signal_units(diagram: Diagram | None) -> dict[str, str | None]:
+    """Unit of every measured signal: the one declared under inputs/outputs, else the block's own."""
+    if diagram is None:
+        return {}
+    blocks = {b.name: b.unit for b in diagram.blocks}
+    return {s.name: s.unit or blocks.get(s.name) for s in (*diagram.inputs, *diagram.outputs)}
+
+
+def _connection_values(compiled: CompiledNetwork, theta: np.ndarray) -> np.ndarray:
+    """The connection values at theta, from the runtime's public weight table."""
+    params, free = compiled.values(theta)
+    table = compiled.weights
+    with np.errstate(all="ignore"):
+        coef = np.array([float(e.evaluate(params)) for e in table.coefs])
+        scale = np.array([free[f] if f is not None else 1.0 for f in table.weight_free])
+        values = coef[table.weight_coef] * scale if len(scale) else np.zeros(0)
+    return compiled.flat.connection_values(values)
+
+
+def predict(compiled: CompiledNetwork, theta: np.ndarray, data: Dataset, alignment: str = "zoh",
+            horizon: int | None = None) -> np.ndarray:
+    """Model outputs for every row of `data` (Q, n_outputs): the free run, or the `horizon`-step-ahead
+    prediction of the module docstring. Row order and alignment as :func:`~flowchart2sdnn.network.alignment.
+    run_aligned` (with zoh, row 0 is the initial state)."""
+    if horizon is not None and (isinstance(horizon, bool) or not isinstance(horizon, (int, np.integer))
+                                or horizon < 1):
+        raise ValueError(f"horizon must be a whole number of samples >= 1, not {horizon!r}")
+    net = compiled.net
+    u = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in network_input_names(net)])
+    init = data_init(net, data)
+    p = network_inputs(u, alignment)
+    if horizon is None or horizon >= len(p):
+        with np.errstate(all="ignore"):
+            return run_aligned(compiled, theta, u, alignment, init)
+    y = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in compiled.output_names])
+    flat = compiled.flat
+    conn = _connection_values(compiled, theta)
+    every = np.arange(flat.n_neurons, dtype=np.int64)
+    first = fitted_rows(data.n_rows, alignment).start  # network step t produces row t + first
+    out = np.empty((len(p), compiled.n_outputs))
+    hist = last = compiled.initial_history(init)
+    with np.errstate(all="ignore"):
+        for s in range(0, len(p), horizon):
+            if s > 0:
+                hist = last.copy()  # the model's state at the end of the previous segment
+                hist[flat.output_index] = y[s - 1 + first]
+            a = simulate_kernel(np.ascontiguousarray(p[s:s + horizon]), flat.conn_ptr, flat.conn_kind,
+                                flat.conn_src, flat.conn_delay, conn, flat.transfer, hist, flat.ring, every)
+            out[s:s + len(a)] = a[:, flat.output_index]
+            last = a[-1]
+    if alignment == "zoh":
+        out = np.vstack([history_outputs(net, init)[None, :], out])
+    return out
+
+
+def _one(compiled, theta, label: str, data: Dataset, alignment: str, horizon: int | None,
+         score_from: int) -> RecordComparison:
+    missing = [n for n in (*network_input_names(compiled.net), *compiled.output_names) if n not in data.columns]
+    if missing:
+        raise SdnnError.at("CMP001", f"record lacks column(s) {', '.join(missing)} that the chart needs",
+                           data.path)
+    names = compiled.output_names
+    yhat = predict(compiled, theta, data, alignment, horizon)
+    start = max(score_from, fitted_rows(data.n_rows, alignment).start)
+    if start >= data.n_rows:
+        raise SdnnError.at("CMP002", f"nothing to score: the record has {data.n_rows} rows, scoring starts at "
+                           f"row {start}", data.path)
+    rows = np.arange(start, data.n_rows)
+    time = (np.asarray(data.time)[rows] if data.time is not None
+            else rows * float(data.sample_time or compiled.net.sample_time))
+    measured, model, rms, fit, worst = {}, {}, {}, {}, {}
+    with np.errstate(all="ignore"):
+        for i, name in enumerate(names):
+            y = np.asarray(data.columns[name], dtype=float)[start:]
+            m = np.where(np.isfinite(yhat[start:, i]), yhat[start:, i], np.nan)
+            e = y - m
+            measured[name], model[name] = y, m
+            finite = bool(np.all(np.isfinite(e)))
+            spread = float(np.linalg.norm(y - y.mean()))
+            rms[name] = finite_or_none(np.sqrt(np.mean(e**2))) if finite else None
+            fit[name] = (finite_or_none(100.0 * (1.0 - np.linalg.norm(e) / spread))
+                         if finite and spread > 0 else None)
+            worst[name] = finite_or_none(np.max(np.abs(e))) if finite else None
+    return RecordComparison(label, data.path, len(rows), time, measured, model, rms, fit, worst)
+
+
+def compare_records(compiled: CompiledNetwork, theta: np.ndarray,
+                    records: Sequence[tuple[str, Dataset, int]], alignment: str = "zoh",
+                    horizon: int | None = None, diagram: Diagram | None = None) -> Comparison:
+    """Compare the network at `theta` with each record ``(label, data, score_from)``; rows before
+    `score_from` are simulated but not scored or shown (a validation after a split)."""
+    out = tuple(_one(compiled, theta, label, data, alignment, horizon, score_from)
+                for label, data, score_from in records)
+    return Comparison(out, horizon, tuple(compiled.output_names), signal_units(diagram))
