@@ -357,3 +357,27 @@ def test_identify_says_when_a_sqrt_argument_went_negative_and_never_returns_nan(
     (warning,) = [w for w in result.warnings if "sqrt 'r'" in w]
     # the network sees u(0) .. u(Q-2) on the Q-1 fitted rows (zoh)
     assert f"negative on {int(np.sum(u[:-1] < 0))} of 299 samples" in warning and "-sqrt(-z)" in warning
+
+
+def test_cli_lint_explain_and_excite_know_the_new_blocks(tmp_path):
+    from click.testing import CliRunner
+
+    from flowchart2sdnn.cli import main
+
+    path = tmp_path / "tanks.yaml"
+    path.write_text(chart(TANKS + "p: {type: product, in: [h1, h2], k: k1}\nab: {type: function, f: abs, in: p}\n",
+                          "h2: {}, ab: {}", TANK_PARAMS, sample_time=0.05))
+    runner = CliRunner()
+    lint = runner.invoke(main, ["lint", str(path)])
+    assert lint.exit_code == 0 and "0 error(s)" in lint.output
+    explain = runner.invoke(main, ["compile", str(path), "--explain"])
+    assert explain.exit_code == 0 and "netprod" in explain.output and " sqrt" in explain.output
+    out = tmp_path / "bench.csv"
+    excite = runner.invoke(main, ["excite", str(path), "--seconds", "5", "--seed", "1", "-o", str(out)])
+    assert excite.exit_code == 0, excite.output
+    data = np.genfromtxt(out, delimiter=",", names=True)
+    assert np.all(np.isfinite(data["h2"])) and np.all(np.isfinite(data["ab"]))
+    diagram = diagram_from_text(path.read_text())
+    y = simulate_continuous(diagram, data["u"][:, None], parameters=None)
+    np.testing.assert_allclose(y[:, 1], np.abs(0.6 * y[:, 0] * simulate_continuous(diagram, data["u"][:, None],
+                                                                                   signals=True)["h1"]), rtol=1e-12)

@@ -36,14 +36,14 @@ import numpy as np
 from numba import njit
 
 from ..diagram.model import Block, Diagram, NonlinearWeights
+from .functions import FUNCTION_CODES as _FUNCTION
+from .functions import chart_function
 
 __all__ = ["RelayFeedback", "simulate_continuous"]
 
 SUM, GAIN, INTEGRATOR, DELAY, CONSTANT, NONLINEAR, FUNCTION, PRODUCT = range(8)
 _KIND = {"sum": SUM, "gain": GAIN, "integrator": INTEGRATOR, "delay": DELAY, "constant": CONSTANT,
          "nonlinear": NONLINEAR, "function": FUNCTION, "product": PRODUCT}
-_FUNCTION = {"tanh": 0, "sin": 1, "cos": 2, "sign_smooth": 3, "sat": 4, "sqrt": 5, "abs": 6, "exp": 7, "square": 8,
-             "signed_square": 9}
 _INIT, _SAMPLE, _CONT = 0, 1, 2  # evaluation modes: at t_0, at t_k (k >= 1), inside an interval
 DEFAULT_EPS = 1e-3
 
@@ -94,17 +94,6 @@ def _product(sig, src, sgn, a, b):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
-def _sqrt(z, eps):
-    """The chart's square root: exact outside (-eps, eps), odd, and a cubic with a finite slope in between."""
-    if z >= eps:
-        return math.sqrt(z)
-    if z <= -eps:
-        return -math.sqrt(-z)
-    u = z / eps
-    return math.sqrt(eps) * (5.0 * u - u * u * u) / 4.0
-
-
-@njit(cache=True, inline="always", error_model="numpy")
 def _evaluate(sig, order, ti, tf, src, sgn, nl, buf, zero0, mode, k):
     for j in order:
         s = ti[j, 0]
@@ -136,28 +125,7 @@ def _evaluate(sig, order, ti, tf, src, sgn, nl, buf, zero0, mode, k):
             for i in range(ti[j, 4], ti[j, 5]):
                 y += nl[i, 2] * math.tanh(nl[i, 0] * x + nl[i, 1])
         else:
-            z = tf[j, 0] * x
-            f = ti[j, 6]
-            if f == 0:
-                y = math.tanh(z)
-            elif f == 1:
-                y = math.sin(z)
-            elif f == 2:
-                y = math.cos(z)
-            elif f == 4:
-                y = min(1.0, max(-1.0, z))
-            elif f == 5:
-                y = _sqrt(z, tf[j, 1])
-            elif f == 6:
-                y = abs(z)
-            elif f == 7:
-                y = math.exp(z)
-            elif f == 8:
-                y = z * z
-            elif f == 9:
-                y = z * abs(z)
-            else:
-                y = math.tanh(z / tf[j, 1])
+            y = chart_function(ti[j, 6], tf[j, 0] * x, tf[j, 1])
         sig[s] = y
 
 
