@@ -13,10 +13,11 @@ import click
 
 from .options import (
     alignment_option,
+    column_reading,
+    data_options,
     executor_options,
     force_option,
     handle_errors,
-    map_option,
     max_iter_option,
     seed_option,
     settings_usage,
@@ -51,7 +52,7 @@ __all__ = ["identify"]
                  "limit is reported as not converged.", default=1000)
 @alignment_option()
 @substeps_option()
-@map_option()
+@data_options
 @click.option("--plots", type=click.Path(file_okay=False),
               help="Directory for the figures (PNG; created if needed, figures of the same name replaced). "
                    "Needs matplotlib: pip install flowchart2sdnn[plots].")
@@ -60,11 +61,11 @@ __all__ = ["identify"]
 @executor_options("the multi-start fits")
 @handle_errors
 def identify(data, chart, output, fix_from, validation, split, starts, seed, online, window, average,
-             max_iter, alignment, substeps, mapping, plots, force, quiet, workers=None, scheduler=None) -> None:
+             max_iter, alignment, substeps, mapping, units, plots, force, quiet, workers=None, scheduler=None) -> None:
     """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
     together, each simulated from its own initial state)."""
     from ..atomic import atomic_write_text, check_output_path
-    from ..data.csvdata import parse_mapping, read_csv
+    from ..data.csvdata import read_csv
     from ..diagram.dump import dump_diagram
     from ..diagram.validate import load_diagram
     from ..errors import SdnnError
@@ -90,10 +91,10 @@ def identify(data, chart, output, fix_from, validation, split, starts, seed, onl
     fixed = []
     if fix_from:
         diagram, fixed = fix_from_result(diagram, fix_from)
-    maps = parse_mapping(mapping)
+    maps, scales = column_reading(diagram, mapping, units)
     cols = required_columns(diagram)
-    train = [read_csv(d, cols, maps, diagram.sample_time) for d in data]
-    val = read_csv(validation, cols, maps, diagram.sample_time) if validation else None
+    train = [read_csv(d, cols, maps, diagram.sample_time, scale=scales) for d in data]
+    val = read_csv(validation, cols, maps, diagram.sample_time, scale=scales) if validation else None
     with settings_usage():
         settings = IdentifySettings(starts=starts, seed=seed, max_iter=max_iter, alignment=alignment, split=split,
                                     online=online, window=window, average=average, fixed_from=tuple(fixed))
@@ -116,7 +117,8 @@ def identify(data, chart, output, fix_from, validation, split, starts, seed, onl
                            hint="the start values make the model unstable on this data: change 'init'")
     if output:
         extra = {"command": {"data": data[0] if len(data) == 1 else list(data), "diagram": chart,
-                             "fix_from": fix_from, "validate": validation, "map": dict(maps)},
+                             "fix_from": fix_from, "validate": validation, "map": dict(maps),
+                             **({"unit": dict(u.split("=", 1) for u in units)} if units else {})},
                  "identified_chart": chart_out}
         # both texts first: a failure here must not leave one file without the other
         chart_text = dump_diagram(outcome.diagram, {"from": output, "status": outcome.status})
