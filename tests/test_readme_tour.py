@@ -17,6 +17,7 @@ from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
+from html_check import read_page
 
 from flowchart2sdnn.cli import main
 
@@ -36,6 +37,7 @@ SHORTEN = [
 
 #: what the tour writes (the files its commands name)
 WRITTEN = ["two_mass.net.json", "two_mass.dot", "bench.csv", "stage1.json", "stage1.chart.yaml", "stage2.json",
+           "stage2.html", "diagnose.html",
            "net.csv", "ode.csv", "compare.png", "two_mass.npz", "bode.png", "bench100.csv", "report.json",
            "logs/drive01_day001.csv", "logs/drive02_day002.csv", "fleet.csv", "fleet_report/report.md"]
 
@@ -43,7 +45,7 @@ WRITTEN = ["two_mass.net.json", "two_mass.dot", "bench.csv", "stage1.json", "sta
 def tour_commands() -> list[str]:
     block = re.search(r"## A five-minute tour\n\n```bash\n(.*?)```", README, re.S)
     assert block, "the README has no tour block"
-    text = block.group(1)
+    text = block.group(1).replace("\\\n", " ")  # a command continued on the next line
     for pattern, replacement, times in SHORTEN:
         text, n = re.subn(pattern, replacement, text, flags=re.M)
         assert n == times, f"{pattern!r} matched {n} times in the README's tour, expected {times}"
@@ -77,3 +79,14 @@ def test_the_readme_tour_runs_as_written(tmp_path, monkeypatch):
         assert res.exit_code == 0, f"{command}\n{res.output}"
     missing = [f for f in WRITTEN if not (tmp_path / f).is_file()]
     assert missing == []
+    # the HTML reports: self-contained, every figure there, small enough to attach
+    figures, text = read_page(tmp_path / "stage2.html")
+    assert figures == ["compare", "resid w2 training", "resid w2 validation: bench.csv after the split", "Bode plot"]
+    assert "two_mass: identification" in text and "N*m/rad" in text and "95 % interval" in text
+    figures, text = read_page(tmp_path / "diagnose.html")
+    accepted = re.search(r"accepted: ([^.]*?) stopped", text).group(1)
+    assert {"compare", "whiteness", "Bode plot"} <= set(figures), figures
+    assert sum(f.startswith("residual_") for f in figures) == accepted.count(" at "), (accepted, figures)
+    assert "Candidates, ranked" in text and "Before and after" in text
+    for page in ("stage2.html", "diagnose.html"):
+        assert (tmp_path / page).stat().st_size < 2_000_000

@@ -19,7 +19,9 @@ from .options import (
     executor_options,
     force_option,
     handle_errors,
+    html_option,
     max_iter_option,
+    require_figures,
     seed_option,
     settings_usage,
     substeps_option,
@@ -89,13 +91,14 @@ def _int_list(text: str) -> tuple[int, ...]:
 @substeps_option()
 @data_options
 @seed_option("Seed for initial curves.")
+@html_option()
 @force_option()
 @click.option("--quiet", is_flag=True, help="No progress and no report text.")
 @executor_options("the candidate refits")
 @handle_errors
 def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
              refit_iter, max_iter, horizon, top, criterion, min_gain, alpha, dead_time_max, harmonics, alignment,
-             substeps, mapping, units, seed, force, quiet, workers=None, scheduler=None) -> None:
+             substeps, mapping, units, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
     """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
     chart, refit, and report the error before and after."""
     from ..atomic import atomic_write_text, check_output_path
@@ -112,15 +115,12 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
         raise click.UsageError("give either --validate or --split, not both")
     cogging_p = _int_list(harmonics)
     inputs = list(data) + [chart] + list(validation) + ([effects_file] if effects_file else [])
-    for path in (output, report_path):
+    for path in (output, report_path, html_path):
         if path:
             check_output_path(path, inputs, force=force)
     if output and report_path and output == report_path:
         raise click.UsageError("-o and --report name the same file")
-    if plots:
-        from ..identify.plots import require_matplotlib
-
-        require_matplotlib()
+    require_figures(plots, html_path)
     user = {}
     if effects_file:
         from ..diagnose.usereffects import load_effects_file
@@ -175,6 +175,12 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
         from ..diagnose.plots import write_plots
 
         written = write_plots(outcome, train[0], plots)
+    if html_path:
+        from ..diagnose.html import diagnosis_html
+        from ..identify.html import write_html
+
+        written.append(write_html(html_path, diagnosis_html(outcome, train[0], val,
+                                                            f"sdnn diagnose {' '.join(data)} --diagram {chart}")))
     if not quiet:
         click.echo(format_report(report), nl=False)
         for path in [p for p in (output, report_path) if p] + [str(w) for w in written]:

@@ -21,7 +21,7 @@ from ..errors import SdnnError
 
 __all__ = ["fail", "handle_errors", "settings_usage", "executor_options", "force_option", "seed_option",
            "map_option", "unit_option", "data_options", "column_reading", "alignment_option", "max_iter_option",
-           "substeps_option", "with_substeps", "ALIGNMENT_HELP"]
+           "substeps_option", "with_substeps", "ALIGNMENT_HELP", "html_option", "require_figures"]
 
 ALIGNMENT_HELP = "zoh: input sample k acts on [t_k, t_k+1) (logged data); direct: output k uses input k."
 
@@ -197,6 +197,21 @@ def with_substeps(diagram, substeps):
     from dataclasses import replace
 
     return replace(diagram, substeps=substeps)
+
+
+def html_option():
+    """``--html REPORT.html``: the run as one self-contained page (figures embedded; needs matplotlib)."""
+    return click.option("--html", "html_path", type=click.Path(dir_okay=False),
+                        help="Write the run as one self-contained HTML page: tables and figures embedded "
+                             "(needs matplotlib: pip install flowchart2sdnn[plots]).")
+
+
+def require_figures(plots, html_path) -> None:
+    """Check matplotlib before any work when figures or a page are asked for (PLOT001 naming the option)."""
+    if plots or html_path:
+        from ..identify.plots import require_matplotlib
+
+        require_matplotlib("--plots" if plots else "--html")
 
 
 def max_iter_option(help: str | None = None, default: int = 100):
