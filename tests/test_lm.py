@@ -315,7 +315,7 @@ def test_small_cost_change_stop():
 def test_damped_step_falls_back_to_least_squares_when_cholesky_fails():
     Ju = np.array([[1.0, 1.0], [2.0, 2.0], [0.0, 0.0]])  # rank 1: J^T J singular
     e = np.array([1.0, 0.5, 0.3])
-    du = lm_module._damped_step(Ju, e, Ju.T @ Ju, Ju.T @ e, 0.0)
+    du = lm_module.damped_step(Ju, e, Ju.T @ Ju, Ju.T @ e, 0.0)
     np.testing.assert_allclose(du, np.linalg.lstsq(Ju, e, rcond=None)[0], rtol=1e-12)
 
 

@@ -142,6 +142,8 @@ def parse_yaml_text(text: str, name: str = "<chart>") -> LocatedYaml:
         line = mark.line + 1 if mark else None
         col = mark.column + 1 if mark else None
         problem = exc.problem or exc.context or "invalid YAML"
+        if "nesting depth" in problem:  # PyYAML >= 6.0.4 refuses deep nesting itself: the same error as ours
+            raise SdnnError.at("YAML005", f"nesting too deep ({problem})", name, line, col) from None
         raise SdnnError.at("YAML004", f"invalid YAML: {problem}", name, line, col) from None
     except yaml.reader.ReaderError as exc:  # a character YAML does not allow (control characters)
         char = chr(exc.character) if isinstance(exc.character, int) else str(exc.character)[:1]

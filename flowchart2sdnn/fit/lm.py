@@ -25,7 +25,7 @@ from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq
 from .damping import TRAINLM_MU0, first_mu, mu_accepted, mu_refused
 from .transforms import Bounds
 
-__all__ = ["LMOptions", "LMResult", "levenberg_marquardt", "STATUS_MESSAGES", "CONVERGED_STATUSES"]
+__all__ = ["LMOptions", "LMResult", "levenberg_marquardt", "damped_step", "STATUS_MESSAGES", "CONVERGED_STATUSES"]
 
 #: Status code -> message (scipy style).  ``LMResult.message`` starts with one of these.
 STATUS_MESSAGES: dict[str, str] = {
@@ -233,7 +233,7 @@ def _call_residual(residual, x, counters) -> np.ndarray | None:
     return e
 
 
-def _damped_step(Ju: np.ndarray, e: np.ndarray, A: np.ndarray, g: np.ndarray, mu: float) -> np.ndarray:
+def damped_step(Ju: np.ndarray, e: np.ndarray, A: np.ndarray, g: np.ndarray, mu: float) -> np.ndarray:
     """Solve (A + mu I) du = g with A = Ju^T Ju, g = Ju^T e.
 
     Cholesky first; if the matrix is not numerically positive definite, the least-squares solution of the
@@ -443,9 +443,9 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
     x_norm = float(np.linalg.norm(point.x))
     for _ in range(opt.max_mu_tries):
         if scale is None:
-            du = _damped_step(Ju, point.e, A, g, mu)
+            du = damped_step(Ju, point.e, A, g, mu)
         else:
-            du = _damped_step(Js, point.e, A, gs, mu) / scale
+            du = damped_step(Js, point.e, A, gs, mu) / scale
         u_t = point.u + du
         x_t = bounds.to_external(u_t)
         tiny = float(np.linalg.norm(x_t - point.x)) <= opt.min_rel_step * (opt.min_rel_step + x_norm)
