@@ -17,8 +17,9 @@ RANKS = {
     "diagram": 2, "fit": 2, "data": 2,
     "analysis": 3, "network": 3,
     "compiler": 4,
+    "simulate": 4.5,  # the continuous oracle and the bench: identify measures its discretization floor with it
     "identify": 5,
-    "simulate": 6, "diagnose": 6,
+    "diagnose": 6,
     "batch": 7,
     "api": 8,
     "__init__": 8.5,  # the public names, over the api they come from

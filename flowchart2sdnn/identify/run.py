@@ -10,7 +10,7 @@ metrics and everything needed to reproduce the run. Never prints: progress goes 
 Every start, serial or not, runs through an executor (:class:`~flowchart2sdnn.executors.SerialExecutor` by
 default) and the one fitting function of :mod:`flowchart2sdnn.identify.workers`.
 
-Layer: identify (below it: fit, network, compiler, data, diagram, executors).
+Layer: identify (below it: simulate's oracle, fit, network, compiler, data, diagram, executors).
 """
 
 from __future__ import annotations
@@ -31,6 +31,7 @@ from ..executors import SerialExecutor
 from ..fit.lm import CONVERGED_STATUSES, LMOptions, LMResult
 from ..fit.multistart import draw_starts, run_multistart
 from .evidence import assess, no_excitation_message, on_bound_warnings, sqrt_domain_warnings, start_stability
+from .floor import floor_warnings, measure_floor
 from .problem import Problem, build_problem, combined_metrics, metrics
 from .result import (
     ChartSource,
@@ -148,13 +149,19 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
             ci = (float(params[p.name] - half), float(params[p.name] + half))
         parameters[p.name] = Estimate(float(params[p.name]), float(p.init), stderr, ci, p.unit, i is None)
 
+    chart = _resolved(with_values(diagram, params, curves), problem.network)
+    fit = _fit(problem, x, settings, train, more, full, validation)
+    disc = discretization(diagram, problem.network)
+    if status == "diverged_at_start":
+        disc["floor"] = {"rms": None, "skipped": "the fit diverged at its start"}
+    else:
+        disc["floor"] = measure_floor(chart, problem.compiled, x, [(d, 0) for d in [train] + more], settings.alignment)
+        warnings.extend(floor_warnings(disc["floor"], fit.train.rms, diagram, problem.network))
     return Identification(
         status=status, message=message, interrupted=bool(interrupted), converged=converged, parameters=parameters,
         curves={b: Curve(tuple(c["a"]), tuple(c["v"]), tuple(c["b"]) if "b" in c else None, c["fixed"])
                 for b, c in curves.items()},
-        fit=_fit(problem, x, settings, train, more, full, validation),
-        warnings=tuple(warnings), settings=settings,
-        chart=_resolved(with_values(diagram, params, curves), problem.network),
+        fit=fit, warnings=tuple(warnings), settings=settings, chart=chart,
         source=ChartSource(diagram.name, diagram.file, diagram.source_sha256),
         data=DataInfo(_record(full if settings.split is not None else train),
                       tuple(_record(d) for d in ([full] if settings.split is not None else [train] + more)),
@@ -164,12 +171,13 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         multistart=out.multistart, uncertainty=evidence.uncertainty,
         online=_online_trace(out.online, problem.names, settings) if out.online is not None else None,
         problem=problem, x=x, lm=out.lm, online_run=out.online,
-        extra={"discretization": discretization(diagram, problem.network)},
+        extra={"discretization": disc},
     )
 
 
 def discretization(diagram, network) -> dict:
-    """RESULT.json's `discretization`: the sub-steps asked for and used, the step, the delay rule."""
+    """RESULT.json's `discretization`: the sub-steps asked for and used, the step, the delay rule (identify adds
+    `floor`, the network against the continuous chart: :mod:`flowchart2sdnn.identify.floor`)."""
     return {"substeps": network.substeps, "requested": diagram.substeps, "sample_time": network.sample_time,
             "step": network.step, "delays": diagram.delays or "search"}
 

@@ -39,6 +39,9 @@ def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str
         for name in m.rms:
             fit_rows.append([which, name, _g(m.cost), _g(m.rms[name]), _g(m.fit_percent[name]), m.rows])
     out.append(table(["record", "output", "cost E", "RMS", "fit %", "rows"], fit_rows).rstrip())
+    floor_line = _floor(result)
+    if floor_line:
+        out.append(floor_line)
     ms = result.multistart
     if ms and ms.n > 1:
         out.append("")
@@ -48,3 +51,18 @@ def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str
         if w not in shown:
             out.append(f"warning: {w}")
     return "\n".join(out) + "\n"
+
+
+def _floor(result: Identification) -> str | None:
+    """The discretization floor beside the training RMS (identify.floor), or why it was not measured."""
+    floor = (result.extra.get("discretization") or {}).get("floor")
+    if not isinstance(floor, dict):
+        return None
+    if not floor.get("rms"):
+        return f"discretization floor: not measured ({floor.get('skipped', 'no oracle run')})"
+    parts = []
+    for name, f in floor["rms"].items():
+        r = result.fit.train.rms.get(name)
+        share = f" ({100 * f / r:.0f} % of RMS)" if r else ""
+        parts.append(f"{name} {f:.3g}{share}")
+    return ("discretization floor (network vs continuous chart, training input, RMS): " + ", ".join(parts))

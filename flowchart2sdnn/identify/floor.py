@@ -1,0 +1,116 @@
+"""The discretization floor of a fitted chart: how far its network is from the continuous chart it stands for.
+
+The network is the chart discretized (implicit Euler forward, a one-step delay in every loop, step h = T/N).
+Its own error against the continuous chart, with the *identified* values, is a floor under every residual: a
+fit cannot tell it from the machine and bends the parameters to absorb it (two-mass bench at N = 1: d −25 %).
+The floor is measured with the independent oracle (:func:`~flowchart2sdnn.simulate.continuous.simulate_continuous`,
+RK4 at fine steps, reading only the chart) on the same inputs, from the same initial states, on the rows the
+fit scores, and reported per output beside the residual RMS.
+
+Layer: identify (below it: simulate's oracle, network, data, diagram).
+"""
+
+from __future__ import annotations
+
+import math
+from collections.abc import Sequence
+
+import numpy as np
+
+from ..data.csvdata import Dataset
+from ..diagram.model import Diagram
+from ..network.alignment import fitted_rows, run_aligned
+
+__all__ = ["FLOOR_WARN", "oracle_steps", "measure_floor", "floor_warnings", "pooled_floor"]
+
+#: Warn when the floor on an output exceeds this fraction of its residual RMS: from there on the network's own
+#: error is a visible part of what the fit calls model error (at 20 % of the RMS it is 4 % of the squared
+#: residual the parameters are fitted to).
+FLOOR_WARN = 0.2
+#: RK4 steps of the oracle per network step (at least 20 per sample, as `simulate --continuous`): RK4's error
+#: falls as h^4, so on any mode the network resolves (omega*h <= 0.01 with `auto`) it is 1e-8 of the signal.
+_ORACLE_PER_STEP = 4
+_ORACLE_MIN = 20
+
+
+def oracle_steps(substeps: int) -> int:
+    """RK4 steps per sample of the oracle for a network of `substeps` steps per sample."""
+    return max(_ORACLE_MIN, _ORACLE_PER_STEP * int(substeps))
+
+
+def _oracle_init(chart: Diagram, data: Dataset) -> dict[str, float]:
+    """`init: data` integrators start at the record's first sample of their own column (as `sdnn simulate`)."""
+    return {b.name: float(data.columns[b.name][0]) for b in chart.blocks
+            if b.kind == "integrator" and b.init == "data"}
+
+
+def _one(chart: Diagram, compiled, x, data: Dataset, alignment: str, score_from: int, steps: int) -> np.ndarray:
+    """Network minus oracle on one record's scored rows, (rows, n_outputs) in the network's output order."""
+    from ..simulate.continuous import simulate_continuous
+    from .problem import data_init, network_input_names
+
+    u_net = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in network_input_names(compiled.net)])
+    y_net = run_aligned(compiled, x, u_net, alignment, data_init(compiled.net, data))
+    u = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in chart.input_names])
+    if alignment == "zoh":  # row k of both is the chart at t_k, input k held over [t_k, t_k+1)
+        y_or = simulate_continuous(chart, u, init=_oracle_init(chart, data), substeps=steps)
+    else:  # direct: the network's row k has seen input k for one sample, the oracle's row k + 1
+        y_or = simulate_continuous(chart, np.vstack([u, u[-1:]]), init=_oracle_init(chart, data), substeps=steps)[1:]
+    order = [chart.output_names.index(n) for n in compiled.output_names]
+    start = max(score_from, fitted_rows(data.n_rows, alignment).start)
+    return y_net[start:] - y_or[start:, order]
+
+
+def measure_floor(chart: Diagram, compiled, x, records: Sequence[tuple[Dataset, int]], alignment: str) -> dict:
+    """The floor on `records` ((record, first scored row)): ``{"rms": {output: RMS}, "rows", "records",
+    "oracle"}``, or ``{"rms": None, "skipped": why}`` where the oracle cannot run the chart or a run diverges.
+
+    `chart` is the chart with the values `x` stands for (the identified chart); `compiled` its network.
+    """
+    steps = oracle_steps(compiled.net.substeps)
+    try:
+        diffs = [_one(chart, compiled, x, d, alignment, s, steps) for d, s in records]
+    except (ValueError, KeyError) as exc:  # the oracle's refusals (e.g. a blow-up) are ValueErrors
+        return {"rms": None, "skipped": f"the continuous oracle cannot run this chart: {exc}"}
+    e = np.vstack(diffs)
+    if not np.all(np.isfinite(e)):
+        return {"rms": None, "skipped": "the network diverges on these records"}
+    if not len(e):
+        return {"rms": None, "skipped": "no scored rows"}
+    rms = np.sqrt(np.mean(e**2, axis=0))
+    return {"rms": {n: float(v) for n, v in zip(compiled.output_names, rms, strict=True)}, "rows": int(len(e)),
+            "records": len(records),
+            "oracle": f"simulate_continuous of the identified chart, RK4 with {steps} steps per sample"}
+
+
+def pooled_floor(floor: dict) -> float | None:
+    """The floor over all outputs at once (the RMS of every difference), as diagnose pools its validation RMS."""
+    rms = floor.get("rms")
+    if not rms:
+        return None
+    return math.sqrt(sum(v * v for v in rms.values()) / len(rms))
+
+
+def floor_warnings(floor: dict, residual_rms, chart: Diagram | None, network) -> list[str]:
+    """A warning per output whose floor exceeds FLOOR_WARN of its residual RMS, with what to change."""
+    rms = floor.get("rms")
+    if not rms:
+        return []
+    over = []
+    for name, f in rms.items():
+        r = residual_rms.get(name)
+        if r is None or not math.isfinite(r):
+            continue
+        if f > FLOOR_WARN * r:
+            over.append(f"{name} {f:.3g} ({'inf' if r == 0 else f'{100 * f / r:.0f}'} % of its residual RMS {r:.3g})")
+    if not over:
+        return []
+    n = network.substeps
+    advice = ["`substeps: auto` in the chart (or --substeps auto)" if n == 1 else
+              f"more sub-steps than the {n} of this fit (substeps: {2 * n} halves the floor)"]
+    if chart is None or chart.delays != "torques":
+        advice.append("`delays: torques`")
+    return [f"the discretization floor (the network against the continuous chart, identified values, training "
+            f"input) is more than {100 * FLOOR_WARN:.0f} % of the residual on {'; '.join(over)}: that part of the "
+            f"residual is the network's own step error, and the parameters absorb it; use "
+            f"{' and '.join(advice)}"]

@@ -1,0 +1,114 @@
+"""The discretization floor `identify` reports: the fitted network against the continuous chart it stands for.
+
+Oracle: the continuous simulation itself (`simulate_continuous` of the identified chart at 200 RK4 steps per
+sample, ten times finer than the floor's own), against the identified network's free run (`result.simulate`).
+"""
+
+from __future__ import annotations
+
+import dataclasses
+import json
+from pathlib import Path
+
+import numpy as np
+import pandas as pd
+import pytest
+
+import flowchart2sdnn as sd
+from flowchart2sdnn.diagram.validate import load_diagram
+from flowchart2sdnn.identify.document import from_document
+from flowchart2sdnn.identify.floor import FLOOR_WARN
+from flowchart2sdnn.identify.summary import format_result
+from flowchart2sdnn.simulate.continuous import simulate_continuous
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
+
+DIAGRAMS = Path(__file__).resolve().parents[1] / "diagrams"
+
+
+@pytest.fixture(scope="module")
+def bench():
+    """Two-mass Coulomb plant (c 477 N*m/rad: a 10 Hz shaft mode), 3 s, sensor noise 0.01 rad/s."""
+    plant = load_diagram(DIAGRAMS / "two_mass_coulomb_plant.yaml")
+    data = excite(plant, ExcitationSettings(seconds=3, seed=2, noise_std=0.01))
+    ds = sd.dataset_from_frame(pd.DataFrame(data), time="time", inputs=["M1"], outputs=["w1", "w2"])
+    return plant, ds
+
+
+def _fit(chart, ds, **options):
+    return sd.identify(chart, ds, max_iter=20, **options)
+
+
+def _oracle_floor(result, ds, alignment="zoh"):
+    """RMS of the identified network's free run against the identified chart simulated continuously."""
+    net = result.simulate(ds, alignment)
+    u = np.asarray(ds.columns["M1"], dtype=float)[:, None]
+    if alignment == "zoh":
+        cont = simulate_continuous(result.chart, u, substeps=200)
+        rows = slice(1, None)
+    else:  # direct: network row k has seen input k for a whole sample, the continuous chart's row k + 1
+        cont = simulate_continuous(result.chart, np.vstack([u, u[-1:]]), substeps=200)[1:]
+        rows = slice(0, None)
+    return {n: float(np.sqrt(np.mean((net[n][rows] - cont[rows, i]) ** 2)))
+            for i, n in enumerate(result.chart.output_names)}
+
+
+def _floor_warnings(result):
+    return [w for w in result.warnings if "discretization floor" in w]
+
+
+def test_floor_at_one_step_warns_and_auto_does_not(bench):
+    plant, ds = bench
+    paper = _fit(dataclasses.replace(plant, substeps=1, delays="search"), ds)
+    fine = _fit(plant, ds)  # substeps: auto, delays: torques
+    for result in (paper, fine):
+        floor = result.extra["discretization"]["floor"]["rms"]
+        oracle = _oracle_floor(result, ds)
+        for name in ("w1", "w2"):
+            assert floor[name] == pytest.approx(oracle[name], rel=0.02, abs=1e-5)
+    floor, rms = paper.extra["discretization"]["floor"]["rms"], paper.fit.train.rms
+    assert max(floor[n] / rms[n] for n in rms) > FLOOR_WARN
+    (warning,) = _floor_warnings(paper)
+    assert "substeps: auto" in warning and "delays: torques" in warning
+    floor, rms = fine.extra["discretization"]["floor"]["rms"], fine.fit.train.rms
+    assert max(floor[n] / rms[n] for n in rms) < FLOOR_WARN
+    assert not _floor_warnings(fine)
+
+
+def test_floor_is_in_the_result_file_and_the_summary(bench):
+    plant, ds = bench
+    result = _fit(dataclasses.replace(plant, substeps=1, delays="search"), ds)
+    doc = json.loads(result.to_json())
+    floor = doc["discretization"]["floor"]
+    assert set(floor["rms"]) == {"w1", "w2"} and floor["rows"] == ds.n_rows - 1
+    assert "RK4" in floor["oracle"]
+    assert from_document(doc).to_document()["discretization"]["floor"] == floor  # read back unchanged
+    text = format_result(result)
+    line = next(ln for ln in text.splitlines() if ln.startswith("discretization floor"))
+    assert f"w2 {floor['rms']['w2']:.3g}" in line and "% of RMS" in line
+
+
+def test_floor_with_direct_alignment_compares_the_same_instants(bench):
+    """With `direct` the network's row k follows input k; a floor taken one sample off would be ~0.1 rad/s."""
+    plant, ds = bench
+    result = _fit(plant, ds, alignment="direct")
+    floor = result.extra["discretization"]["floor"]["rms"]
+    oracle = _oracle_floor(result, ds, "direct")
+    for name in ("w1", "w2"):
+        assert floor[name] == pytest.approx(oracle[name], rel=0.02, abs=1e-5)
+        assert floor[name] < 0.003
+
+
+def test_floor_skips_cleanly_where_the_oracle_cannot_run(bench, monkeypatch):
+    plant, ds = bench
+
+    def refuse(*args, **kwargs):
+        raise ValueError("algebraic loop (no integrator or delay on it): a -> b -> a")
+
+    monkeypatch.setattr("flowchart2sdnn.simulate.continuous.simulate_continuous", refuse)
+    result = _fit(plant, ds)
+    floor = result.extra["discretization"]["floor"]
+    assert floor["rms"] is None and "cannot run this chart" in floor["skipped"]
+    assert not _floor_warnings(result)
+    assert "discretization floor: not measured (the continuous oracle cannot run" in format_result(result)
+    assert result.status != "error" and result.parameters["J1"].value > 0
+
