@@ -112,3 +112,33 @@ def test_floor_skips_cleanly_where_the_oracle_cannot_run(bench, monkeypatch):
     assert "discretization floor: not measured (the continuous oracle cannot run" in format_result(result)
     assert result.status != "error" and result.parameters["J1"].value > 0
 
+
+# ------------------------------------------------------------------------------------------------ diagnose
+def test_diagnose_credits_no_effect_with_the_floor():
+    """A complete chart (the three-mass plant itself, at the truth) at one step per sample with the search rule:
+    its residual is noise plus the network's own step error. A one-sample dead time imitates that error (without
+    the floor rule diagnose accepted it: validation RMS 0.0083 -> 0.0076, BIC down; the floor is 0.0085, the
+    whole validation RMS); the rule refuses it."""
+    from flowchart2sdnn.diagnose import DiagnoseSettings, diagnose
+    from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
+
+    plant = load_diagram(DIAGRAMS / "three_mass_plant.yaml")
+    data = excite(plant, ExcitationSettings(seconds=4, seed=2, noise_std=0.003))
+    ds = sd.dataset_from_frame(pd.DataFrame(data), time="time", inputs=["M1"], outputs=["w1", "w2", "w3"])
+    chart = dataclasses.replace(plant, substeps=1, delays="search")
+    settings = DiagnoseSettings(rounds=1, max_iter=50)
+    result = diagnose(chart, ds, settings=settings, effects=[BUILTIN_EFFECTS["dead_time"]])
+    report = result.report
+    assert report["accepted"] == []
+    (entry,) = report["rounds"]
+    assert "discretization floor" in entry["reason"]
+    # the validation RMS fell by more than min_gain: the floor alone refused it
+    assert entry["validation_rms_after"] < entry["validation_rms_before"] * (1 - settings.min_gain)
+    # the floor diagnose used, against the oracle: the nominal fit's network vs its chart run continuously,
+    # over the validation part (the last 30 % of the record), every output pooled
+    ident = result.nominal.identification
+    net = ident.simulate(ds)
+    cont = simulate_continuous(ident.chart, np.asarray(ds.columns["M1"], dtype=float)[:, None], substeps=200)
+    first = int(round(0.7 * ds.n_rows))
+    diff = np.column_stack([net[n][first:] - cont[first:, i] for i, n in enumerate(ident.chart.output_names)])
+    assert report["before"]["validation_floor"] == pytest.approx(float(np.sqrt(np.mean(diff**2))), rel=0.02)

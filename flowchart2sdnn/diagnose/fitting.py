@@ -8,20 +8,21 @@ from __future__ import annotations
 
 import math
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
+from ..identify.floor import measure_floor, pooled_floor
 from ..identify.problem import Problem, build_problem, metrics
 from ..identify.run import Identification, IdentifySettings, identify
 from ..identify.settings import REFIT_TAU
 from .effects import Scales
 from .residual import signal_correlation, whiteness
 
-__all__ = ["DiagnoseSettings", "Fitted", "fit_chart", "fit_growing", "horizons", "current_problem", "effect_scales",
+__all__ = ["DiagnoseSettings", "Fitted", "fit_chart", "with_floor", "fit_growing", "horizons", "current_problem", "effect_scales",
            "residual_analysis", "DEFAULT_SPLIT"]
 
 DEFAULT_SPLIT = 0.7
@@ -87,6 +88,9 @@ class Fitted:
     validation: dict
     start: str = "chart"
     accepted: tuple = ()
+    # the discretization floor on the validation records (identify.floor, pooled over outputs as validation_rms):
+    # measured for the fits a candidate is compared against (see with_floor), None elsewhere or where skipped
+    validation_floor: float | None = None
 
     @property
     def diagram(self) -> Diagram:
@@ -157,6 +161,17 @@ def _fitted(ident: Identification, records, settings: DiagnoseSettings, extra_do
     cost = math.inf if cost is None else float(cost)
     return Fitted(ident, cost, ident.problem.n_residuals, len(ident.problem.names) + extra_dof,
                   _validate(ident, records, settings.alignment), start, accepted)
+
+
+def with_floor(fitted: Fitted, records, settings: DiagnoseSettings) -> Fitted:
+    """`fitted` with its discretization floor on the validation `records` ((Dataset, first row)): the RMS
+    difference between its network and its chart simulated continuously (the oracle), what no effect can be
+    credited with removing (see loop.refusal)."""
+    ident = fitted.identification
+    if ident.chart is None or ident.problem is None or not math.isfinite(fitted.validation_rms):
+        return fitted
+    floor = measure_floor(ident.chart, ident.problem.compiled, ident.x, records, settings.alignment)
+    return replace(fitted, validation_floor=pooled_floor(floor))
 
 
 def horizons(train: Sequence[Dataset], first: int) -> list[int]:

@@ -27,6 +27,7 @@ a Dask cluster with the same results as in this process.
 
 from __future__ import annotations
 
+import math
 import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
@@ -47,6 +48,7 @@ from .fitting import (
     fit_growing,
     horizons,
     residual_analysis,
+    with_floor,
 )
 from .score import Candidate, Score, Screen, screen
 
@@ -73,7 +75,7 @@ def _summary(f: Fitted) -> dict:
     res = f.identification.fit.train
     val = f.validation["records"]
     return {"rms": finite_or_none(f.rms), "validation_rms": finite_or_none(f.validation_rms), "aic": finite_or_none(f.aic), "bic": finite_or_none(f.bic),
-            "cost": finite_or_none(f.cost), "k": f.k, "rms_per_output": dict(res.rms), "fit_percent": dict(res.fit_percent),
+            "cost": finite_or_none(f.cost), "k": f.k, "validation_floor": finite_or_none(f.validation_floor), "rms_per_output": dict(res.rms), "fit_percent": dict(res.fit_percent),
             "validation_rms_per_output": [m["rms"] for m in val],
             "validation_fit_percent": [m["fit_percent"] for m in val]}
 
@@ -116,7 +118,14 @@ def _order(refits: list[tuple[Score, Fitted]], settings: DiagnoseSettings) -> li
 
 def refusal(after: Fitted, before: Fitted, settings: DiagnoseSettings) -> str | None:
     """Why the refit `after` must not replace `before`, or None when it may: the validation RMS must fall by at
-    least ``min_gain`` over all validation records and on the median record, and the criterion must fall.
+    least ``min_gain`` over all validation records and on the median record, by more than the discretization
+    floor of `before` explains, and the criterion must fall.
+
+    The floor (``before.validation_floor``, :func:`~.fitting.with_floor`): the network of the fitted chart
+    against the same chart simulated continuously, on the validation records. A complete chart's validation
+    error is noise and that floor (independent, so their squares add); an effect that only imitates the
+    network's step error can at best remove the floor's share, so the validation MSE must fall by more than
+    floor² (two-mass Coulomb bench at N = 1: see docs/diagnose.md).
 
     The median record: on a chaotic drive one short record whose trajectory diverges (or locks back) moves the
     pooled RMS by several % (backlash bench, round 2: a cogging term the plant lacks lowered one record's RMS
@@ -127,6 +136,12 @@ def refusal(after: Fitted, before: Fitted, settings: DiagnoseSettings) -> str | 
         return "validation RMS did not fall enough"
     if not after.validation_median < before.validation_median * keep:
         return "validation RMS of the median record did not fall enough"
+    floor = before.validation_floor
+    if floor and not after.validation_rms ** 2 < before.validation_rms ** 2 - floor ** 2:
+        room = before.validation_rms ** 2 - floor ** 2
+        need = f"below {math.sqrt(room):.4g}" if room > 0 else "the whole validation RMS is within the floor"
+        return (f"validation RMS {before.validation_rms:.4g} -> {after.validation_rms:.4g} is what the "
+                f"discretization floor {floor:.3g} can explain ({need}); use `substeps: auto`, `delays: torques`")
     if not after.criterion(settings.criterion) < before.criterion(settings.criterion):
         return f"{settings.criterion.upper()} did not fall"
     return None
@@ -205,7 +220,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             progress(text, fraction)
 
     say("fitting the chart as given", 0.0)
-    nominal = fit_chart(diagram, train, records, settings, settings.max_iter, 0, "chart", say)
+    nominal = with_floor(fit_chart(diagram, train, records, settings, settings.max_iter, 0, "chart", say), records,
+                         settings)
     current, nominal_chart, extra_dof = nominal, diagram, 0
     rounds, candidates_out, accepted, screens = [], [], [], []
     done: set = set()
@@ -270,6 +286,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             stop_now = _was_interrupted(polished)
             if stop_now or not (polished.cost <= f.cost and polished.validation_rms <= f.validation_rms):
                 polished = f  # the brief refit validates better: stop early there
+            polished = with_floor(polished, records, settings)  # the next round's candidates must beat its floor
             rounds.append(_round_entry(r, s, current, polished, True, "validation RMS and "
                                        f"{settings.criterion.upper()} fell", settings))
             accepted.append({"effect": c.name, "at": c.at, "option": s.as_dict()["option"], "label": c.label})
