@@ -19,7 +19,7 @@ propagate, and the caller checks ``np.isfinite``.
 
 Speed (the offline trainer calls these kernels a few times per iteration at Q of 10^4 to 10^5; the networks are
 small, so the cost is per-connection overhead, not flops): the rows of S are padded to a multiple of four
-lanes and updated as vectors (:mod:`.rowops`); indices are cast to unsigned (:func:`_ix`) so that numba
+lanes and updated as vectors (:mod:`.rowops`); indices are cast to unsigned (:func:`ix`) so that numba
 emits no negative-index wraparound per access; the accumulator ``dn`` is cleared by the vector store that
 emits a neuron's row, not by a loop that LLVM turns into a ``memset`` call. The sums keep their sequential
 order (no "reassoc"), so every result is the bits of the plain loops.
@@ -34,7 +34,7 @@ import numpy as np
 
 from .rowops import axpy, emit, padded
 
-__all__ = ["simulate_kernel", "jacobian_kernel", "simulate_step", "rtrl_step", "padded"]
+__all__ = ["simulate_kernel", "jacobian_kernel", "simulate_step", "rtrl_step", "padded", "ix"]
 
 # Fused multiply-add. No "reassoc": with it LLVM vectorized the sum over a neuron's connections (gathers, from
 # 8 connections on), which changed its rounding with the code around it; the loops over theta need no
@@ -44,7 +44,7 @@ _FAST = {"contract", "nsz", "arcp"}
 
 
 @numba.njit(cache=True, inline="always")
-def _ix(i):
+def ix(i):
     """An index known to be >= 0, as uint64: numba then emits no negative-index wraparound for it."""
     return np.uint64(i)
 
@@ -82,7 +82,7 @@ def _slots(t, ring, slot_of):
     slot = t % ring
     s = slot
     for d in range(ring):
-        slot_of[_ix(d)] = s
+        slot_of[ix(d)] = s
         s = s - 1 if s > 0 else ring - 1
     return slot
 
@@ -98,17 +98,17 @@ def simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val
     slot = _slots(t, ring, slot_of)
     for k in range(transfer.shape[0]):
         n = 0.0
-        for c in range(conn_ptr[_ix(k)], conn_ptr[_ix(k + 1)]):
-            kind = conn_kind[_ix(c)]
-            d = conn_delay[_ix(c)]
+        for c in range(conn_ptr[ix(k)], conn_ptr[ix(k + 1)]):
+            kind = conn_kind[ix(c)]
+            d = conn_delay[ix(c)]
             if kind == 0:
-                x = a_buf[_ix(slot_of[_ix(d)]), _ix(conn_src[_ix(c)])]
+                x = a_buf[ix(slot_of[ix(d)]), ix(conn_src[ix(c)])]
             elif kind == 1:
-                x = inputs[_ix(max(t - d, 0)), _ix(conn_src[_ix(c)])]
+                x = inputs[ix(max(t - d, 0)), ix(conn_src[ix(c)])]
             else:
                 x = 1.0
-            n += conn_val[_ix(c)] * x
-        a_buf[_ix(slot), _ix(k)] = _transfer(transfer[_ix(k)], n)
+            n += conn_val[ix(c)] * x
+        a_buf[ix(slot), ix(k)] = _transfer(transfer[ix(k)], n)
 
 
 @numba.njit(cache=True, inline="always")
@@ -125,19 +125,19 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
     ring = a_buf.shape[0]
     slot = _slots(t, ring, slot_of)
     for p in range(dn.shape[0]):  # from here on each neuron's emit leaves the accumulators at zero
-        dn[_ix(p)] = 0.0
+        dn[ix(p)] = 0.0
     if with_blk:
         for p in range(dn2.shape[0]):
-            dn2[_ix(p)] = 0.0
+            dn2[ix(p)] = 0.0
     for k in range(transfer.shape[0]):
         n = 0.0
-        for c in range(conn_ptr[_ix(k)], conn_ptr[_ix(k + 1)]):
-            kind = conn_kind[_ix(c)]
-            d = conn_delay[_ix(c)]
-            w = conn_val[_ix(c)]
+        for c in range(conn_ptr[ix(k)], conn_ptr[ix(k + 1)]):
+            kind = conn_kind[ix(c)]
+            d = conn_delay[ix(c)]
+            w = conn_val[ix(c)]
             if kind == 0:
-                src_slot = _ix(slot_of[_ix(d)])
-                src = _ix(conn_src[_ix(c)])
+                src_slot = ix(slot_of[ix(d)])
+                src = ix(conn_src[ix(c)])
                 x = a_buf[src_slot, src]
                 # before t = 0 the source is history, whose sensitivity is zero
                 if t - d >= 0 and w != 0.0:
@@ -145,21 +145,21 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
                     if with_blk:
                         axpy(dn2, w, s_blk[src_slot, src])
             elif kind == 1:
-                x = inputs[_ix(max(t - d, 0)), _ix(conn_src[_ix(c)])]
+                x = inputs[ix(max(t - d, 0)), ix(conn_src[ix(c)])]
             else:
                 x = 1.0
             n += w * x
-            for e in range(dptr[_ix(c)], dptr[_ix(c + 1)]):
-                dn[_ix(dtheta[_ix(e)])] += x * dval[_ix(e)]
+            for e in range(dptr[ix(c)], dptr[ix(c + 1)]):
+                dn[ix(dtheta[ix(e)])] += x * dval[ix(e)]
                 if with_blk:
-                    dn2[_ix(dtheta[_ix(e)])] += x * dval[_ix(e)]
-        code = transfer[_ix(k)]
+                    dn2[ix(dtheta[ix(e)])] += x * dval[ix(e)]
+        code = transfer[ix(k)]
         a = _transfer(code, n)
-        a_buf[_ix(slot), _ix(k)] = a
+        a_buf[ix(slot), ix(k)] = a
         g = _slope(code, n, a)
-        emit(s_buf[_ix(slot), _ix(k)], g, dn)
+        emit(s_buf[ix(slot), ix(k)], g, dn)
         if with_blk:
-            emit(s_blk[_ix(slot), _ix(k)], g, dn2)
+            emit(s_blk[ix(slot), ix(k)], g, dn2)
 
 
 @numba.njit(cache=True, fastmath=_FAST)
@@ -181,9 +181,9 @@ def simulate_kernel(
     slot_of = np.empty(ring, dtype=np.int64)
     for t in range(n_steps):
         simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, a_buf, slot_of)
-        slot = _ix(t % ring)
+        slot = ix(t % ring)
         for o in range(record.shape[0]):
-            out[_ix(t), _ix(o)] = a_buf[slot, _ix(record[_ix(o)])]
+            out[ix(t), ix(o)] = a_buf[slot, ix(record[ix(o)])]
     return out
 
 
@@ -231,10 +231,10 @@ def jacobian_kernel(
     for t in range(n_steps):
         rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
                   a_buf, s_buf, s_buf, False, slot_of, dn, dn)
-        slot = _ix(t % ring)
+        slot = ix(t % ring)
         for o in range(n_rec):
-            r = _ix(record[_ix(o)])
-            y[_ix(t), _ix(o)] = a_buf[slot, r]
+            r = ix(record[ix(o)])
+            y[ix(t), ix(o)] = a_buf[slot, r]
             for p in range(n_theta):
-                dy[_ix(t), _ix(o), _ix(p)] = s_buf[slot, r, _ix(p)]
+                dy[ix(t), ix(o), ix(p)] = s_buf[slot, r, ix(p)]
     return y, dy
