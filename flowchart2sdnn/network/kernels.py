@@ -118,7 +118,7 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
     of `s_buf` (ring, N, n_pad).
 
     The rows of `s_buf`, `s_blk`, `dn` and `dn2` have the padded length ``n_pad = padded(P)`` (:mod:`.rowops`);
-    the padding lanes stay zero. With `with_blk`, a second set of sensitivities `s_blk` follows the same
+    nothing reads the padding lanes. With `with_blk`, a second set of sensitivities `s_blk` follows the same
     recursion (the quasi-online kernel's trial mode restarts it at zero at each block start); otherwise `s_blk`
     and `dn2` are not touched. `slot_of` (ring,) int64, `dn` and `dn2` (n_pad,) float64 are scratch.
     """

@@ -1,11 +1,12 @@
 """Operations on the rows of the RTRL sensitivity buffers, four float64 lanes at a time.
 
 A row is the sensitivity of one neuron with respect to every theta, a C-contiguous float64 vector whose length
-is P rounded up to a multiple of :data:`LANES` (:func:`padded`); the padding lanes stay zero. P is small
-(3 to a few dozen), and LLVM's loop vectorizer does not help there: it needs a multiple of its vector width
-times its interleave count (16 or more iterations) and runtime alias checks before each loop, so rows of 15
-ran scalar, each behind a vectorization preamble. numba leaves LLVM's SLP vectorizer off, so unrolled scalar
-code stays scalar too. These intrinsics emit the ``<4 x double>`` loads, arithmetic and stores directly.
+is P rounded up to a multiple of :data:`LANES` (:func:`padded`); nothing reads the padding lanes (zero, or NaN
+after a non-finite weight: lanes never mix). P is small (3 to a few dozen), and LLVM's loop vectorizer does
+not help there: it needs a multiple of its vector width times its interleave count (16 or more iterations)
+and runtime alias checks before each loop, so rows of 15 ran scalar, each behind a vectorization preamble.
+numba leaves LLVM's SLP vectorizer off, so unrolled scalar code stays scalar too. These intrinsics emit the
+``<4 x double>`` loads, arithmetic and stores directly.
 
 Every lane does what the scalar loop did (``dst[p] + w * src[p]``, ``g * src[p]``) with the caller's
 fastmath flags (numba sets them on every float instruction of the function it compiles), so results are the
