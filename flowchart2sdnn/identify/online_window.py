@@ -130,21 +130,23 @@ def resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its):
     cc = 0.0
     ee = 0.0
     count = its[I_COUNT]
-    for i in range(count):
-        q = (its[I_HEAD] - count + i + window) % window
+    q = (its[I_HEAD] - count + window) % window
+    for _ in range(count):
         for o in range(n_out):
-            jq = win_J[q, o]
+            jq = win_J[ix(q), ix(o)]
             shift = 0.0
             for p in range(n_theta):
-                shift += jq[p] * (u[p] - u_ref[p])
-            c = win_c[q, o] - shift
-            win_c[q, o] = c
+                shift += jq[ix(p)] * (u[ix(p)] - u_ref[ix(p)])
+            c = win_c[ix(q), ix(o)] - shift
+            win_c[ix(q), ix(o)] = c
             cc += c * c
-            ee += win_e[q, o] * win_e[q, o]
+            ee += win_e[ix(q), ix(o)] * win_e[ix(q), ix(o)]
             for p in range(n_theta):
+                jp = jq[ix(p)]
                 for r in range(p + 1):
-                    A[p, r] += jq[p] * jq[r]
-                b[p] += jq[p] * c
+                    A[ix(p), ix(r)] += jp * jq[ix(r)]
+                b[ix(p)] += jp * c
+        q = q + 1 if q + 1 < window else 0
     u_ref[:] = u
     fs[F_CC] = cc
     fs[F_EE] = ee
