@@ -80,6 +80,9 @@ def valid_chart(r: random.Random) -> dict:
             terms = [r.choice(earlier) for _ in range(r.randint(1, 3))]
             terms += [n for n in later if r.random() < 0.5]
             spec["in"] = [r.choice(["", "-", "+"]) + t for t in terms]
+        elif kind == "product":  # factors from earlier blocks, none a learned curve (that needs a sum first)
+            ok = inputs + [n for n in names[:i] if kinds[n] != "nonlinear"]
+            spec["in"] = [r.choice(["", "-"]) + r.choice(ok) for _ in range(r.randint(2, 3))]
         elif kind == "nonlinear":
             ok = inputs + [n for n in names[:i] if kinds[n] in ("sum", "integrator")]
             spec["in"] = r.choice(ok)
@@ -141,7 +144,9 @@ def random_chart(r: random.Random) -> dict:
             spec["in"] = [r.choice(["", "-", "+"]) + _name(r, signals) for _ in range(r.randint(1, 3))]
         elif kind != "constant":
             spec["in"] = _name(r, signals)
-        if kind in ("gain", "constant") or (kind == "function" and r.random() < 0.5):
+        if kind == "product":
+            spec["in"] = [r.choice(["", "-"]) + _name(r, signals) for _ in range(r.randint(1, 3))]
+        if kind in ("gain", "constant") or (kind in ("function", "product") and r.random() < 0.5):
             spec["k"] = _expr(r, params)
         if kind == "function":
             spec["f"] = r.choice(FUNCTIONS)

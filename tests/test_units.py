@@ -162,7 +162,7 @@ def test_str_round_trip(text):
         ("2*m", "only '1'", 1),
         ("m^", "exponent", 3),
         ("m^x", "exponent", 3),
-        ("m^1.5", "^(3/2)", 4),
+        ("m^1.333", "^(1/3)", 3),  # a decimal exponent must be a simple fraction (m^1.5 is m^(3/2))
         ("m^(1/0)", "denominator", 6),
         ("m^(1/2", "')'", 7),
         ("(m", "')'", 3),
@@ -264,3 +264,10 @@ def test_arbitrary_text_only_raises_unit_error(text):
         return
     if math.isclose(u.scale, 1.0) and all(abs(d) <= 10 for d in u.dims):  # str() of a scaled unit is not parseable
         assert parse_unit(str(u)) == u
+
+
+@pytest.mark.parametrize("decimal, fraction", [("V^0.5", "V^(1/2)"), ("m^1.5", "m^(3/2)"), ("m^-0.5", "m^(-1/2)"),
+                                               ("s^(0.5)", "s^(1/2)"), ("V^2.0", "V^2")])
+def test_decimal_exponents_are_the_simple_fraction_they_write(decimal, fraction):
+    assert parse_unit(decimal) == parse_unit(fraction)
+    assert parse_unit(decimal) ** 2 == parse_unit(fraction) ** 2

@@ -145,6 +145,20 @@ def _function_slope(b: Block, k: float, x: float, kink: str) -> tuple[float, flo
         return math.cos(z), -k * math.sin(z)
     if b.f == "sat":
         return min(1.0, max(-1.0, z)), k if abs(z) < 1 else 0.0
+    if b.f == "abs":  # the kink at 0 taken as its subgradient 0, like the Coulomb kink
+        return abs(z), k * float(np.sign(z))
+    if b.f == "exp":
+        return math.exp(z), k * math.exp(z)
+    if b.f == "square":
+        return z * z, 2 * k * z
+    if b.f == "signed_square":
+        return z * abs(z), 2 * k * abs(z)
+    if b.f == "sqrt":  # the chart's regularised square root (simulate.continuous): finite slope at 0
+        eps = _DEFAULT_EPS if b.eps is None else float(b.eps)
+        if abs(z) >= eps:
+            return math.copysign(math.sqrt(abs(z)), z), k * 0.5 / math.sqrt(abs(z))
+        u = z / eps
+        return math.sqrt(eps) * (5 * u - u**3) / 4, k * (5 - 3 * u * u) / (4 * math.sqrt(eps))
     eps = _DEFAULT_EPS if b.eps is None else float(b.eps)  # sign_smooth
     value = math.tanh(z / eps)
     return value, (k / eps * (1 - value**2) if kink == "smooth" else 0.0)
@@ -221,6 +235,11 @@ def linearize(diagram: Diagram, at: Mapping[str, float] | None = None, kink: str
             y, g = k * x, k
         elif b.kind == "constant":
             y, g = k, 0.0
+        elif b.kind == "product":  # the product rule: each factor's row times the others' values
+            xs = [t.sign * value[t.signal] for t in b.inputs]
+            y, g, r = k * float(np.prod(xs)), 1.0, np.zeros(n + m)
+            for i, t in enumerate(b.inputs):
+                r = r + k * float(np.prod(xs[:i] + xs[i + 1:])) * t.sign * row[t.signal]
         elif b.kind == "delay":
             y, g = x, 1.0
             notes.append(f"delay '{b.name}' ({b.n or 1} samples) taken as no delay: it lags the phase by "

@@ -13,9 +13,12 @@
 | LINT009 | warning  | argument of a function block is not dimensionless |
 | LINT010 | error    | chart with no input or no output |
 | LINT011 | error    | a gain cannot be evaluated at the parameters' initial values (1/J with J = 0, overflow) |
+| LINT012 | warning  | the argument of a `sqrt` can be negative (a difference, k < 0, a negative start or constant) |
 """
 
 from __future__ import annotations
+
+from fractions import Fraction
 
 import numpy as np
 
@@ -31,7 +34,8 @@ __all__ = ["lint_diagram"]
 
 def lint_diagram(diagram: Diagram) -> list[Diagnostic]:
     out: list[Diagnostic] = []
-    for check in (_io, _algebraic_loops, _unused, _reachability, _bounds, _gains, _units, _identifiability):
+    for check in (_io, _algebraic_loops, _unused, _reachability, _bounds, _gains, _units, _identifiability,
+                  _sqrt_domain):
         out.extend(check(diagram))
     return out
 
@@ -113,6 +117,40 @@ def _gains(diagram: Diagram):
             yield Diagnostic("LINT011", "error", f"'k: {b.k}' cannot be evaluated at the parameters' initial "
                              f"values: {exc.message}", _loc(diagram, b), b.name,
                              "give its parameters an init where the gain is a finite number")
+
+
+def _sqrt_domain(diagram: Diagram):
+    """What the chart alone tells about a square root's argument going negative (the data may tell more: the
+    trainer counts the samples where it did). Below 0 `sqrt` is -sqrt(-z), which is a reversed flow between
+    two tanks, but nonsense for a level that should never be negative, so the user should know."""
+    env = diagram.parameter_values()
+    for b in diagram.blocks:
+        if b.kind != "function" or b.f != "sqrt" or not b.inputs:
+            continue
+        why = None
+        try:
+            k = b.k.evaluate(env) if b.k is not None else 1.0
+        except ExprError:
+            k = 1.0  # LINT011 reports it
+        (term,) = b.inputs
+        source = diagram.block(term.signal) if term.signal in diagram.block_names else None
+        if k < 0 or term.sign < 0:
+            why = "its factor k (with the input's sign) is negative"
+        elif source is not None and source.kind == "sum" and any(t.sign < 0 for t in source.inputs):
+            why = f"'{source.name}' is a difference"
+        elif source is not None and source.kind == "integrator" and isinstance(source.init, float) \
+                and source.init < 0:
+            why = f"integrator '{source.name}' starts at {source.init:g}"
+        elif source is not None and source.kind == "constant" and source.k is not None:
+            try:
+                if source.k.evaluate(env) < 0:
+                    why = f"constant '{source.name}' is negative"
+            except ExprError:
+                pass
+        if why:
+            yield Diagnostic("LINT012", "warning", f"the argument of sqrt can be negative ({why}); below 0 it is "
+                             "-sqrt(-z) (a reversed flow), not a NaN", _loc(diagram, b), b.name,
+                             "if it should never be negative, check the chart's signs")
 
 
 # ---------------------------------------------------------------------------------------------- units
@@ -198,13 +236,21 @@ def _units(diagram: Diagram):
                 elif b.kind == "function":
                     computed = DIMENSIONLESS
                     ku = _unit_of_k(b.k, pu) if b.k is not None else DIMENSIONLESS
-                    if ins[0] is not None and ku is not None:
-                        arg = ins[0] * ku
-                        if not arg.is_dimensionless and b.name not in reported and b.f != "sign_smooth":
-                            reported.add(b.name)
-                            diags.append(Diagnostic("LINT009", "warning",
-                                                    f"argument of {b.f} has unit {arg}, expected dimensionless",
-                                                    _loc(diagram, b), b.name))
+                    arg = ins[0] * ku if ins[0] is not None and ku is not None else None
+                    if b.f in _UNIT_FUNCTIONS:  # these carry the argument's unit through
+                        computed = None if arg is None else arg ** _UNIT_FUNCTIONS[b.f]
+                    elif arg is not None and not arg.is_dimensionless and b.name not in reported \
+                            and b.f != "sign_smooth":
+                        reported.add(b.name)
+                        diags.append(Diagnostic("LINT009", "warning",
+                                                f"argument of {b.f} has unit {arg}, expected dimensionless",
+                                                _loc(diagram, b), b.name))
+                elif b.kind == "product" and all(u is not None for u in ins):
+                    ku = _unit_of_k(b.k, pu) if b.k is not None else DIMENSIONLESS
+                    if ku is not None:
+                        computed = ku
+                        for u in ins:
+                            computed = times(computed, u)
             except UnitError as exc:
                 if b.name not in reported:
                     reported.add(b.name)
@@ -227,6 +273,10 @@ def _units(diagram: Diagram):
         if not changed:
             break
     return diags
+
+
+#: functions whose output has a unit: the argument's to this power (the others need a dimensionless argument)
+_UNIT_FUNCTIONS = {"sqrt": Fraction(1, 2), "abs": 1, "square": 2, "signed_square": 2}
 
 
 def _unit_of_k(k: Expr, parameter_units: dict) -> Unit | None:

@@ -31,7 +31,7 @@ from .graph import algebraic_graph, chart_graph, delay_free_graph, distances
 __all__ = ["LoopReport", "analyse_loops", "find_algebraic_loops", "torque_edges"]
 
 _KIND_RANK = {"input": 0, "constant": 1, "sum": 2, "gain": 3, "function": 4, "nonlinear": 5, "delay": 6,
-              "integrator": 7}
+              "integrator": 7, "product": 8}
 
 
 @dataclass(frozen=True)

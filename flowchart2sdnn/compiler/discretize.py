@@ -3,6 +3,8 @@
 Which blocks become neurons (the paper's summing junctions):
 - sum -> one linear neuron; integrator -> one linear neuron with a self connection a(t-1) (implicit Euler:
   y(t) = y(t-1) + T*x(t); its inputs carry the factor T); function -> one neuron with transfer f;
+  product -> one linear neuron whose net input is the product of its weighted inputs (MATLAB's netprod), k in
+  the first factor's weight;
   nonlinear -> `neurons` tanh neurons whose output weights v_i sit on the consumers' connections;
 - gain, delay and constant blocks are folded: a gain multiplies the connection's coefficient, a delay adds
   samples to its delay, a constant becomes a bias. A folded block that is a chart output gets a linear
@@ -26,8 +28,10 @@ from ..expr import Expr, Num, const, mul, neg
 
 __all__ = ["Source", "Connection", "NeuronBlock", "DiscreteChart", "discretize", "NEURON_KINDS"]
 
-NEURON_KINDS = ("sum", "integrator", "function", "nonlinear")
-_TRANSFER = {"tanh": "tanh", "sin": "sin", "cos": "cos", "sign_smooth": "tanh", "sat": "sat"}
+NEURON_KINDS = ("sum", "integrator", "function", "nonlinear", "product")
+_TRANSFER = {"tanh": "tanh", "sin": "sin", "cos": "cos", "sign_smooth": "tanh", "sat": "sat", "sqrt": "sqrt",
+             "abs": "abs", "exp": "exp", "square": "square", "signed_square": "signed_square"}
+_SINGLE = ("sum", "integrator", "function", "product")  # blocks that are one neuron
 DEFAULT_EPS = 1e-3
 MAX_FOLDED = 40  # gain/delay blocks folded into one weight with a parameter in it (expr.py nests at most 50)
 
@@ -61,6 +65,7 @@ class NeuronBlock:
     transfers: tuple[str, ...]
     inputs: tuple[tuple[Connection, ...], ...]  # per neuron
     init: tuple[float | str, ...] | None = None  # integrators: history value or "data"
+    net_input: str = "sum"  # "prod": the neuron multiplies its weighted inputs (a product block)
 
 
 @dataclass(frozen=True)
@@ -85,6 +90,15 @@ def initial_nonlinear_weights(block: Block, seed: int, position: int) -> dict[st
     return {"a": a, "v": v, "b": b}
 
 
+def output_scale(b: Block) -> float:
+    """What a neuron's output is multiplied by to give the block's signal: sqrt(eps) for `sqrt`, whose network
+    transfer is the square root regularised on (-1, 1) fed with z / eps (sqrt(z) = sqrt(eps) sqrt(z / eps)); 1
+    for every other block."""
+    if b.kind == "function" and b.f == "sqrt":
+        return float(np.sqrt(b.eps or DEFAULT_EPS))
+    return 1.0
+
+
 def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int = 1) -> DiscreteChart:
     blocks = {b.name: b for b in diagram.blocks}
     inputs = set(diagram.input_names)
@@ -103,8 +117,8 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int
             if signal in inputs:
                 return [Connection(Source("input", signal), coef, delay, None, path)]
             b = blocks[signal]
-            if b.kind in ("sum", "integrator", "function"):
-                return [Connection(Source("neuron", b.name), coef, delay, None, path)]
+            if b.kind in _SINGLE:
+                return [Connection(Source("neuron", b.name), mul(coef, const(output_scale(b))), delay, None, path)]
             if b.kind == "nonlinear":
                 return [Connection(Source("neuron", b.name, i), coef, delay, f"{b.name}.v{i + 1}", path)
                         for i in range(b.neurons)]
@@ -138,6 +152,21 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int
             out.extend(trace(t.signal, b.name, mul(scale, sign), 0, (b.name,)))
         return tuple(out)
 
+    def factors(b: Block) -> tuple[Connection, ...]:
+        """One connection per factor of a product: a factor that is a sum of several connections (a learned
+        curve's weighted tanh neurons) would need a neuron of its own."""
+        out: list[Connection] = []
+        for i, t in enumerate(b.inputs):
+            scale = (b.k if b.k is not None else const(1.0)) if i == 0 else const(1.0)
+            conns = trace(t.signal, b.name, mul(scale, const(float(t.sign))), 0, (b.name,))
+            if len(conns) != 1:
+                raise SdnnError.at(
+                    "COMPILE005", f"a product cannot take the learned curve '{t.signal}' as a factor directly",
+                    diagram.file, b.location.line if b.location else None, block=b.name,
+                    hint=f"put a sum block in between: {{type: sum, in: [{t.signal}]}}")
+            out.extend(conns)
+        return tuple(out)
+
     neuron_blocks: list[NeuronBlock] = []
     free: list[tuple[str, str, str, float, bool]] = []
     T = const(diagram.sample_time / substeps)  # the step h; exactly T when substeps is 1
@@ -151,9 +180,11 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int
                                                                                       else 0.0,)))
         elif b.kind == "function":
             k = b.k if b.k is not None else const(1.0)
-            if b.f == "sign_smooth":
+            if b.f in ("sign_smooth", "sqrt"):  # the network's tanh and sqrt have eps = 1: scale the argument
                 k = mul(k, const(1.0 / (b.eps or DEFAULT_EPS)))
             neuron_blocks.append(NeuronBlock(b.name, b.kind, (_TRANSFER[b.f],), (terms_of(b, k),)))
+        elif b.kind == "product":
+            neuron_blocks.append(NeuronBlock(b.name, b.kind, ("linear",), (factors(b),), net_input="prod"))
         elif b.kind == "nonlinear":
             w = initial_nonlinear_weights(b, seed, rank.get(b.name, 0))
             (base,) = [terms_of(b, const(1.0))]
@@ -179,7 +210,7 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int
     outputs = []
     for s in diagram.outputs:
         b = blocks[s.name]
-        if b.kind in ("sum", "integrator", "function"):
+        if b.kind in _SINGLE and output_scale(b) == 1.0:
             outputs.append((s.name, b.name, 0))
             continue
         # folded blocks (and a nonlinear block's weighted sum) are read out by a linear neuron of their own

@@ -61,8 +61,8 @@ def emit_network(diagram: Diagram, chart: DiscreteChart, loops: LoopReport, seed
         size = len(nb.transfers)
         names = [nb.name] if size == 1 else [f"{nb.name}[{i + 1}]" for i in range(size)]
         block = nb.name[: -len("__out")] if nb.kind == "readout" else nb.name
-        layers.append(LayerSpec(nb.name, tuple(NeuronSpec(n, t) for n, t in zip(names, nb.transfers, strict=True)),
-                                block, nb.kind))
+        layers.append(LayerSpec(nb.name, tuple(NeuronSpec(n, t, nb.net_input)
+                                               for n, t in zip(names, nb.transfers, strict=True)), block, nb.kind))
         for k, conns in enumerate(nb.inputs):
             for c in conns:
                 coefs.append(c.coef)

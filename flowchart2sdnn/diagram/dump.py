@@ -23,7 +23,7 @@ def _block_dict(b: Block) -> dict:
     d: dict = {"type": b.kind}
     if b.kind != "constant":
         terms = [str(t) for t in b.inputs]
-        d["in"] = terms if b.kind == "sum" else terms[0]
+        d["in"] = terms if b.kind in ("sum", "product") else terms[0]
     if b.k is not None:
         d["k"] = _yaml_number(b.k.evaluate({})) if b.k.is_constant else str(b.k)
     if b.kind == "integrator" and b.init not in (None, 0.0):

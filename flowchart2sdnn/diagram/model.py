@@ -20,6 +20,8 @@ __all__ = [
     "MAX_SUBSTEPS",
     "DELAY_RULES",
     "BLOCK_KINDS",
+    "FUNCTIONS",
+    "EPS_FUNCTIONS",
     "Signal",
     "Parameter",
     "Term",
@@ -33,8 +35,12 @@ FORMAT_VERSION = 1
 MAX_SUBSTEPS = 1000
 #: `delays`: which feedback edges carry the one-step delay (see analysis.loops)
 DELAY_RULES = ("search", "torques")
-BLOCK_KINDS = ("sum", "gain", "integrator", "delay", "constant", "nonlinear", "function")
-FUNCTIONS = ("tanh", "sin", "cos", "sign_smooth", "sat")  # sat(z) = clip(z, -1, 1)
+BLOCK_KINDS = ("sum", "gain", "integrator", "delay", "constant", "nonlinear", "function", "product")
+# sat(z) = clip(z, -1, 1); sqrt is signed and regularised within eps of 0 (see FUNCTION_HELP);
+# square is z^2, signed_square z*|z| (a drag that keeps the sign of the speed)
+FUNCTIONS = ("tanh", "sin", "cos", "sign_smooth", "sat", "sqrt", "abs", "exp", "square", "signed_square")
+#: functions whose `eps` means something (the others ignore it)
+EPS_FUNCTIONS = ("sign_smooth", "sqrt")
 
 
 @dataclass(frozen=True)
@@ -91,7 +97,7 @@ class Block:
     unit: str | None = None
     description: str | None = None
     location: Location | None = None
-    # gain, constant, function: the factor k (an expression of parameters)
+    # gain, constant, function, product: the factor k (an expression of parameters)
     k: Expr | None = None
     # integrator: initial value (a number, or "data": the first measured sample of this output)
     init: float | str | None = None

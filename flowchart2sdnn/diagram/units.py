@@ -9,8 +9,10 @@ Unit grammar (symbols come from an explicit table, no generic prefixes)::
     unit     := factor (('*' | '/') factor)*       ('*' after '/' at the same level is refused as ambiguous)
     factor   := atom ('^' exponent)?
     atom     := SYMBOL | '1' | '(' unit ')'
-    exponent := ['-'] INT | '(' ['-'] INT ['/' INT] ')'
+    exponent := ['-'] NUMBER | '(' ['-'] NUMBER ['/' INT] ')'      NUMBER: 2, or a decimal such as 0.5 or 1.5
 
+A decimal exponent must be a simple fraction (``V^0.5`` is ``V^(1/2)``; ``V^0.333`` is refused: write
+``V^(1/3)``); a square root of a unit (``f: sqrt``) prints with a fractional exponent.
 ``kg/m*s`` is refused because readers split between (kg/m)*s and kg/(m*s): write ``kg*s/m`` or
 ``kg/(m*s)``. ``str()`` of a unit with scale 1 re-parses to an equal unit; a scaled one prints its factor
 first (``0.001*m*s^-1``), which is readable but not parseable.
@@ -34,7 +36,7 @@ BASE_SYMBOLS = ("kg", "m", "s", "A", "K", "mol", "cd")
 MAX_LENGTH = 200
 MAX_DEPTH = 10
 MAX_EXPONENT = 10
-_TOKEN = re.compile(r"\s*(?:(?P<name>[A-Za-z_][A-Za-z0-9_]*)|(?P<int>[0-9]+)|(?P<op>[*/^()+-]))")
+_TOKEN = re.compile(r"\s*(?:(?P<name>[A-Za-z_][A-Za-z0-9_]*)|(?P<int>[0-9]+(?:\.[0-9]+)?)|(?P<op>[*/^()+-]))")
 _HINT = {"µ": "write 'u' for micro, e.g. 'um'", "μ": "write 'u' for micro, e.g. 'um'", "·": "write '*'",
          "²": "write '^2'", "³": "write '^3'", "°": "write 'deg'", "Ω": "write 'Ohm'", ".": "write '*'"}
 _ALIASES = {"sec": "s", "secs": "s", "hr": "h", "Nms": "N*m*s", "kgm2": "kg*m^2"}
@@ -247,12 +249,16 @@ class _Parser:
         if self.tok[0] in ("-", "+"):
             self.advance()
         if self.tok[0] != "int":
-            raise self.fail("an integer exponent such as 2, -1 or (1/2)")
-        p = Fraction(sign * int(self.advance()[1]))
+            raise self.fail("an exponent such as 2, -1, 0.5 or (1/2)")
+        text = self.advance()[1]
+        p = sign * Fraction(text)
+        if p.denominator > 100:  # 0.333 is not 1/3: say which fraction is meant
+            raise UnitError(f"exponent {text} at column {col} is not a simple fraction; expected e.g. 0.5 or "
+                            "(1/3)", col, "write a fraction as ^(1/3)")
         if grouped:
             if self.tok[0] == "/":
                 self.advance()
-                if self.tok[0] != "int" or int(self.tok[1]) == 0:
+                if self.tok[0] != "int" or not self.tok[1].isdigit() or int(self.tok[1]) == 0:
                     raise self.fail("a positive integer denominator")
                 p /= int(self.advance()[1])
             if self.tok[0] != ")":

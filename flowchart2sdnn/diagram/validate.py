@@ -51,6 +51,7 @@ BLOCK_KEYS: dict[str, tuple[str, ...]] = {
     "constant": ("k",),
     "nonlinear": ("in", "neurons", "bias", "init_range", "fixed", "weights"),
     "function": ("in", "f", "k", "eps"),
+    "product": ("in", "k"),
 }
 
 
@@ -344,11 +345,15 @@ class _Validator:
             if "in" in spec:
                 self.error("CHART003", "a constant block takes no 'in'", path + ("in",), name)
         else:
-            fields["inputs"] = self.terms(spec, path, name, many=(kind == "sum"))
+            fields["inputs"] = self.terms(spec, path, name, many=kind in ("sum", "product"))
+            if kind == "product" and len(fields["inputs"]) == 1:
+                self.error("CHART004", "a product needs at least two signals in 'in'; use a gain block to scale "
+                           "one signal", path + ("in",), name)
         if kind in ("gain", "constant"):
             fields["k"] = self.expression(spec, "k", path, name, pnames, required=True)
-        elif kind == "function":
+        elif kind in ("function", "product"):
             fields["k"] = self.expression(spec, "k", path, name, pnames, required=False)
+        if kind == "function":
             f = spec.get("f")
             if f not in FUNCTIONS:
                 self.error("CHART004" if "f" in spec else "CHART002",

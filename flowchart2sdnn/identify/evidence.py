@@ -16,7 +16,7 @@ from ..fit.uncertainty import covariance
 from .problem import CHATTER_LIMIT, GROWTH_LIMIT, Problem
 from .result import Uncertainty
 
-__all__ = ["start_stability", "on_bound_warnings", "no_excitation_message", "Evidence", "assess", "CHATTER_WARN"]
+__all__ = ["sqrt_domain_warnings", "start_stability", "on_bound_warnings", "no_excitation_message", "Evidence", "assess", "CHATTER_WARN"]
 
 #: Warn when the fitted network is this close to chattering at rest.
 CHATTER_WARN = 0.9
@@ -152,3 +152,29 @@ def _identifiability_warnings(cov, problem: Problem) -> list[str]:
         if {a, b} & physical and not any({a, b} <= set(g) for g in cov.unidentifiable):
             out.append(f"{a} and {b} are almost interchangeable here (correlation {r:+.4f})")
     return out
+
+
+def sqrt_domain_warnings(problem: Problem, x: np.ndarray) -> list[str]:
+    """The samples where a `sqrt` block's argument went negative in the fitted model (lint can only say that it
+    may). There the chart's sqrt is -sqrt(-z): a flow that reverses, never a NaN, but a level that should not
+    go below 0 did, and the user should know."""
+    layers = [la.name for la in problem.network.layers if any(n.transfer == "sqrt" for n in la.neurons)]
+    if not layers:
+        return []
+    counts = dict.fromkeys(layers, 0)
+    lowest = dict.fromkeys(layers, 0.0)
+    total = 0
+    for s in problem.segments:
+        signals = problem.compiled.signals(x, s.inputs, s.init)
+        total += s.inputs.shape[0]
+        for name in layers:
+            a = signals[name]
+            a = a[np.isfinite(a)]
+            counts[name] += int(np.sum(a < 0))  # the root is odd: negative exactly where its argument is
+            lowest[name] = min(lowest[name], float(a.min()) if a.size else 0.0)
+    blocks = {b.name: b for b in problem.diagram.blocks}
+    # the network's root is the chart's over sqrt(eps) (compiler.discretize.output_scale)
+    scale = {n: math.sqrt(blocks[n].eps or 1e-3) if n in blocks else 1.0 for n in layers}
+    return [f"sqrt '{name}': its argument was negative on {counts[name]} of {total} samples of the training data "
+            f"(there sqrt(z) is taken as -sqrt(-z), a reversed flow; the root fell to {lowest[name] * scale[name]:.3g})"
+            for name in layers if counts[name]]

@@ -30,7 +30,7 @@ from ..errors import SdnnError
 from ..executors import SerialExecutor
 from ..fit.lm import CONVERGED_STATUSES, LMOptions, LMResult
 from ..fit.multistart import draw_starts, run_multistart
-from .evidence import assess, no_excitation_message, on_bound_warnings, start_stability
+from .evidence import assess, no_excitation_message, on_bound_warnings, sqrt_domain_warnings, start_stability
 from .initstate import estimate_initial_state
 from .problem import Problem, build_problem, combined_metrics, data_init, metrics
 from .result import (
@@ -134,6 +134,8 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         warnings.append(f"not converged: {message}; the parameters may be far from the minimum (raise max_iter, "
                         "or start closer)")
     warnings.extend(evidence.warnings)
+    if status != "diverged_at_start":
+        warnings.extend(sqrt_domain_warnings(problem, x))
 
     params, _ = problem.compiled.values(x)
     curves = _curves(problem, x)

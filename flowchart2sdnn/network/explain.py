@@ -30,6 +30,8 @@ def explain_network(net: Network) -> str:
     ]
     for m, la in enumerate(net.layers):
         transfers = ",".join(sorted({n.transfer for n in la.neurons}))
+        if any(n.net_input == "prod" for n in la.neurons):  # MATLAB's name for a product net input
+            transfers = "netprod (n = product of the weighted inputs), " + transfers
         lines.append(f"  {m + 1:>3}  {la.name:<14} {la.kind or '':<11} {la.size} neuron(s)  {transfers}")
     lines += ["", "inputs:"]
     lines += [f"  p{i + 1} = {s.name}" + (f" [{s.unit}]" if s.unit else "") for i, s in enumerate(net.inputs)]
@@ -72,7 +74,7 @@ def network_dot(net: Network) -> str:
         lines.append(f'  "p{i + 1}" [shape=box, label="{s.name}"];')
     for m, la in enumerate(net.layers):
         for k, n in enumerate(la.neurons):
-            shape = "doublecircle" if n.transfer != "linear" else "circle"
+            shape = "doublecircle" if n.transfer != "linear" or n.net_input == "prod" else "circle"
             lines.append(f'  "{m + 1}.{k + 1}" [shape={shape}, label="{m + 1}.{k + 1}\\n{n.name}\\n{n.transfer}"];')
     for w in net.weights:
         target = f"{w.layer + 1}.{w.row + 1}"

@@ -5,7 +5,7 @@ connection always comes from an earlier layer, evaluating neurons in global orde
 every dependency. The incoming connections of each neuron are stored in CSR form. A *connection* is one
 distinct (target neuron, source kind, source index, delay): several :class:`WeightSpec` that hit the same
 matrix cell are merged into one connection whose value is the sum of theirs, so the kernels visit each cell
-once.
+once -- except into a product neuron, where every weight is a factor of its own (x*x is not 2*x).
 """
 
 from __future__ import annotations
@@ -22,6 +22,7 @@ __all__ = [
     "KIND_INPUT",
     "KIND_BIAS",
     "TRANSFER_CODES",
+    "PRODUCT_CODE",
     "FlatNetwork",
     "flatten",
     "signal_names",
@@ -30,7 +31,11 @@ __all__ = [
 KIND_NEURON = 0
 KIND_INPUT = 1
 KIND_BIAS = 2
-TRANSFER_CODES = {"linear": 0, "tanh": 1, "sin": 2, "cos": 3, "sat": 4}
+TRANSFER_CODES = {"linear": 0, "tanh": 1, "sin": 2, "cos": 3, "sat": 4, "sqrt": 5, "abs": 6, "exp": 7, "square": 8,
+                  "signed_square": 9}
+#: the kernels' code of a product neuron (net input prod, linear transfer): the net input decides how the
+#: connections combine, so it travels with the transfer code rather than in an array of its own
+PRODUCT_CODE = 10
 
 
 @dataclass(frozen=True, eq=False)
@@ -119,23 +124,26 @@ def flatten(net: Network) -> FlatNetwork:
     layer_offset = np.zeros(len(sizes) + 1, dtype=np.int64)
     layer_offset[1:] = np.cumsum(sizes)
     n_neurons = int(layer_offset[-1])
+    neurons = [n for la in net.layers for n in la.neurons]
     transfer = np.array(
-        [TRANSFER_CODES[n.transfer] for la in net.layers for n in la.neurons], dtype=np.int64
+        [PRODUCT_CODE if n.net_input == "prod" else TRANSFER_CODES[n.transfer] for n in neurons], dtype=np.int64
     ).reshape(n_neurons)
 
-    # Distinct connections, keyed (target, kind, source, delay); sorted so each neuron's block is contiguous.
-    keys: list[tuple[int, int, int, int]] = []
-    for w in net.weights:
+    # Distinct connections, keyed (target, kind, source, delay, factor); sorted so each neuron's block is
+    # contiguous. `factor` is the weight's index into a product neuron (each weight a factor), else -1 (merged).
+    keys: list[tuple[int, int, int, int, int]] = []
+    for j, w in enumerate(net.weights):
         target = int(layer_offset[w.layer]) + w.row
+        factor = j if transfer[target] == PRODUCT_CODE else -1
         if w.matrix == "LW":
-            keys.append((target, KIND_NEURON, int(layer_offset[w.source]) + w.col, w.delay))
+            keys.append((target, KIND_NEURON, int(layer_offset[w.source]) + w.col, w.delay, factor))
         elif w.matrix == "IW":
-            keys.append((target, KIND_INPUT, w.source, w.delay))
+            keys.append((target, KIND_INPUT, w.source, w.delay, factor))
         else:
-            keys.append((target, KIND_BIAS, 0, 0))
+            keys.append((target, KIND_BIAS, 0, 0, factor))
     unique = sorted(set(keys))
     index = {key: c for c, key in enumerate(unique)}
-    conn = np.array(unique, dtype=np.int64).reshape(len(unique), 4)
+    conn = np.array(unique, dtype=np.int64).reshape(len(unique), 5)
     weight_conn = np.array([index[key] for key in keys], dtype=np.int64)
     conn_ptr = np.searchsorted(conn[:, 0], np.arange(n_neurons + 1)).astype(np.int64)
 

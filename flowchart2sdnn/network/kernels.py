@@ -13,6 +13,10 @@ RTRL (Williams & Zipser 1989; De Jesús & Hagan 2007, written per neuron instead
                 + sum_c x_c(t - d_c) dw_c/dtheta         [sparse: only the theta a connection depends on]
     S_k(t)      = f'(n_k(t)) dn_k/dtheta
 
+A product neuron (transfer code ``PRODUCT``, see :mod:`.flat`) has ``n_k = prod_c w_c x_c(t - d_c)``; its
+sensitivity follows the product rule factor by factor (:func:`_product_rtrl`), without dividing by a factor
+that may be zero.
+
 The history does not depend on theta, so its sensitivities are zero. S is kept in a ring buffer too, so memory
 does not grow with Q except for the (Q, n_out, P) result. The kernels never raise on non-finite values: they
 propagate, and the caller checks ``np.isfinite``.
@@ -30,6 +34,7 @@ __all__ = ["simulate_kernel", "jacobian_kernel", "simulate_step", "rtrl_step"]
 # Reassociation and fused multiply-add let LLVM vectorize the loops over theta. No "nnan"/"ninf": a diverging
 # simulation must still come back as NaN/inf for the trainer to reject it.
 _FAST = {"contract", "reassoc", "nsz", "arcp"}
+PRODUCT = 10  # flat.PRODUCT_CODE: a product net input with a linear transfer
 
 
 @numba.njit(cache=True, inline="always")
@@ -42,7 +47,23 @@ def _transfer(code, n):
         return math.sin(n)
     if code == 4:
         return min(1.0, max(-1.0, n))
-    return math.cos(n)
+    if code == 3:
+        return math.cos(n)
+    if code == 5:  # sqrt, odd and regularised on (-1, 1) (network.model.TRANSFERS)
+        if n >= 1.0:
+            return math.sqrt(n)
+        if n <= -1.0:
+            return -math.sqrt(-n)
+        return (5.0 * n - n * n * n) * 0.25
+    if code == 6:
+        return abs(n)
+    if code == 7:
+        return math.exp(n)
+    if code == 8:
+        return n * n
+    if code == 9:
+        return n * abs(n)
+    return n  # PRODUCT: linear
 
 
 @numba.njit(cache=True, inline="always")
@@ -56,7 +77,71 @@ def _slope(code, n, a):
         return math.cos(n)
     if code == 4:
         return 1.0 if -1.0 < n < 1.0 else 0.0
-    return -math.sin(n)
+    if code == 3:
+        return -math.sin(n)
+    if code == 5:  # finite at 0: 5/4
+        if n >= 1.0 or n <= -1.0:
+            return 0.5 / math.sqrt(abs(n))
+        return (5.0 - 3.0 * n * n) * 0.25
+    if code == 6:
+        return 1.0 if n > 0.0 else (-1.0 if n < 0.0 else 0.0)
+    if code == 7:
+        return a
+    if code == 8:
+        return 2.0 * n
+    if code == 9:
+        return 2.0 * abs(n)
+    return 1.0  # PRODUCT: linear
+
+
+@numba.njit(cache=True, inline="always")
+def _product_value(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_val, conn_delay, a_buf, slot_of):
+    """Net input of the product neuron k: the product of its weighted inputs."""
+    n = 1.0
+    for c in range(conn_ptr[k], conn_ptr[k + 1]):
+        kind = conn_kind[c]
+        if kind == 0:
+            x = a_buf[slot_of[conn_delay[c]], conn_src[c]]
+        elif kind == 1:
+            x = inputs[max(t - conn_delay[c], 0), conn_src[c]]
+        else:
+            x = 1.0
+        n *= conn_val[c] * x
+    return n
+
+
+@numba.njit(cache=True, inline="always")
+def _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, a_buf,
+                  s_buf, slot_of, dn):
+    """Net input of the product neuron k and its sensitivity (from the sensitivities `s_buf`) into `dn`, by the
+    product rule one factor at a time: with P the product so far and dP its derivative, a factor f = w x gives
+    d(P f) = dP f + P df, df = w S_src(t - d) + x dw/dtheta. Exact with zero factors (no division). Returns n."""
+    n = 1.0
+    for p in range(dn.shape[0]):
+        dn[p] = 0.0
+    for c in range(conn_ptr[k], conn_ptr[k + 1]):
+        kind = conn_kind[c]
+        d = conn_delay[c]
+        w = conn_val[c]
+        if kind == 0:
+            x = a_buf[slot_of[d], conn_src[c]]
+        elif kind == 1:
+            x = inputs[max(t - d, 0), conn_src[c]]
+        else:
+            x = 1.0
+        f = w * x
+        for p in range(dn.shape[0]):
+            dn[p] *= f
+        if kind == 0 and t - d >= 0:  # before t = 0 the source is history, whose sensitivity is zero
+            src_slot = slot_of[d]
+            src = conn_src[c]
+            nw = n * w
+            for p in range(dn.shape[0]):
+                dn[p] += nw * s_buf[src_slot, src, p]
+        for e in range(dptr[c], dptr[c + 1]):
+            dn[dtheta[e]] += n * x * dval[e]
+        n *= f
+    return n
 
 
 @numba.njit(cache=True, inline="always")
@@ -71,6 +156,10 @@ def simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val
     for d in range(ring):  # slot of a(t - d), refreshed each step: no modulo per connection
         slot_of[d] = (t - d + ring) % ring
     for k in range(transfer.shape[0]):
+        if transfer[k] == PRODUCT:
+            a_buf[slot, k] = _product_value(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_val, conn_delay, a_buf,
+                                            slot_of)
+            continue
         n = 0.0
         for c in range(conn_ptr[k], conn_ptr[k + 1]):
             kind = conn_kind[c]
@@ -101,6 +190,13 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
     for d in range(ring):
         slot_of[d] = (t - d + ring) % ring
     for k in range(transfer.shape[0]):
+        if transfer[k] == PRODUCT:  # linear transfer: S = dn
+            a_buf[slot, k] = _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr,
+                                           dtheta, dval, a_buf, s_buf, slot_of, s_buf[slot, k])
+            if with_blk:
+                _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval,
+                              a_buf, s_blk, slot_of, s_blk[slot, k])
+            continue
         n = 0.0
         for p in range(n_theta):
             dn[p] = 0.0

@@ -31,6 +31,7 @@ __all__ = [
     "NETWORK_FORMAT",
     "NETWORK_VERSION",
     "TRANSFERS",
+    "NET_INPUTS",
     "NeuronSpec",
     "LayerSpec",
     "InputSpec",
@@ -45,13 +46,28 @@ __all__ = [
 
 NETWORK_FORMAT = "sdnn-network"
 NETWORK_VERSION = 1
-TRANSFERS = ("linear", "tanh", "sin", "cos", "sat")  # sat: hard clip to [-1, 1]
+# sat: hard clip to [-1, 1]; sqrt: sqrt(n) for n >= 1, -sqrt(-n) for n <= -1, (5 n - n^3) / 4 in between (the
+# odd C1 continuation with a finite slope 5/4 at 0; the compiler scales a chart's eps to 1); square: n^2;
+# signed_square: n |n|; abs: |n| (slope sign(n), 0 at 0); exp
+TRANSFERS = ("linear", "tanh", "sin", "cos", "sat", "sqrt", "abs", "exp", "square", "signed_square")
+#: net input functions: "sum" of weighted inputs (eq. 1), or their "prod"uct (MATLAB's netprod)
+NET_INPUTS = ("sum", "prod")
 
 
 @dataclass(frozen=True)
 class NeuronSpec:
+    """One neuron. ``net_input`` "prod": n = prod_c w_c x_c over its connections instead of the sum, one
+    connection per factor (two weights from the same source and delay are two factors, x^2)."""
+
     name: str
     transfer: str = "linear"
+    net_input: str = "sum"
+
+    def to_dict(self) -> dict:
+        d = {"name": self.name, "transfer": self.transfer}
+        if self.net_input != "sum":  # files of networks without products stay as they were
+            d["net_input"] = self.net_input
+        return d
 
 
 @dataclass(frozen=True)
@@ -251,7 +267,7 @@ class Network:
             "step": self.step,
             "inputs": [asdict(i) for i in self.inputs],
             "layers": [
-                {"name": la.name, "block": la.block, "kind": la.kind, "neurons": [asdict(n) for n in la.neurons]}
+                {"name": la.name, "block": la.block, "kind": la.kind, "neurons": [n.to_dict() for n in la.neurons]}
                 for la in self.layers
             ],
             "parameters": [asdict(p) for p in self.parameters],
@@ -323,6 +339,10 @@ class Network:
             for n in la.neurons:
                 if n.transfer not in TRANSFERS:
                     raise ValueError(f"neuron {n.name!r}: unknown transfer {n.transfer!r}")
+                if n.net_input not in NET_INPUTS:
+                    raise ValueError(f"neuron {n.name!r}: unknown net input {n.net_input!r}")
+                if n.net_input == "prod" and n.transfer != "linear":
+                    raise ValueError(f"neuron {n.name!r}: a product neuron has a linear transfer")
         for j, w in enumerate(self.weights):
             if w.matrix not in ("LW", "IW", "b"):
                 raise ValueError(f"weight {j}: unknown matrix {w.matrix!r}")

@@ -18,7 +18,16 @@ from .model import Network
 __all__ = ["rest_eigenvalues", "chatter_radius", "rest_radii"]
 
 
-def _derivative(transfer: str, n: np.ndarray) -> np.ndarray:
+def _value(transfer: str, n: float) -> float:
+    if transfer == "sqrt":  # see network.model.TRANSFERS
+        return float(np.sign(n) * np.sqrt(abs(n))) if abs(n) >= 1.0 else (5.0 * n - n**3) / 4.0
+    if transfer == "signed_square":
+        return n * abs(n)
+    return {"tanh": np.tanh, "sin": np.sin, "cos": np.cos, "sat": lambda x: np.clip(x, -1.0, 1.0),
+            "abs": abs, "exp": np.exp, "square": lambda x: x * x}.get(transfer, lambda x: x)(n)
+
+
+def _derivative(transfer: str, n: float) -> float:
     if transfer == "tanh":
         return 1.0 - np.tanh(n) ** 2
     if transfer == "sin":
@@ -26,21 +35,40 @@ def _derivative(transfer: str, n: np.ndarray) -> np.ndarray:
     if transfer == "cos":
         return -np.sin(n)
     if transfer == "sat":
-        return np.where(np.abs(n) < 1.0, 1.0, 0.0)
-    return np.ones_like(n)
+        return 1.0 if abs(n) < 1.0 else 0.0
+    if transfer == "sqrt":
+        return 0.5 / np.sqrt(abs(n)) if abs(n) >= 1.0 else (5.0 - 3.0 * n * n) / 4.0
+    if transfer == "abs":
+        return float(np.sign(n))
+    if transfer == "exp":
+        return np.exp(n)
+    if transfer == "square":
+        return 2.0 * n
+    if transfer == "signed_square":
+        return 2.0 * abs(n)
+    return 1.0
 
 
 def rest_eigenvalues(net: Network, values: np.ndarray) -> np.ndarray:
-    """Eigenvalues of the network linearized at rest, for weight values `values` (Network.weights order)."""
+    """Eigenvalues of the network linearized at rest, for weight values `values` (Network.weights order).
+
+    A product neuron's row holds its partial derivatives at rest, w_c times the other factors (zero when two
+    factors are signals at rest: a product of two states has no linear part there).
+    """
     offsets = np.cumsum([0] + [la.size for la in net.layers])
     n = int(offsets[-1])
     dmax = max([w.delay for w in net.weights if w.matrix == "LW"] + [1])
     L = np.zeros((dmax + 1, n, n))
     bias = np.zeros(n)
-    transfers = [nr.transfer for la in net.layers for nr in la.neurons]
+    neurons = [nr for la in net.layers for nr in la.neurons]
+    transfers = [nr.transfer for nr in neurons]
+    factors: dict[int, list[tuple[str, int, int, float]]] = {}  # product neuron -> (matrix, source, delay, w)
     for w, v in zip(net.weights, values, strict=True):
         row = offsets[w.layer] + w.row
-        if w.matrix == "LW":
+        if neurons[row].net_input == "prod":
+            source = offsets[w.source] + w.col if w.matrix == "LW" else w.source
+            factors.setdefault(row, []).append((w.matrix, int(source), w.delay, float(v)))
+        elif w.matrix == "LW":
             L[w.delay, row, offsets[w.source] + w.col] += v
         elif w.matrix == "b":
             bias[row] += v
@@ -48,11 +76,17 @@ def rest_eigenvalues(net: Network, values: np.ndarray) -> np.ndarray:
     a = np.zeros(n)
     nrest = np.zeros(n)
     for k in range(n):
-        nrest[k] = bias[k] + L[0, k] @ a
-        t = transfers[k]
-        a[k] = {"tanh": np.tanh, "sin": np.sin, "cos": np.cos,
-                "sat": lambda x: np.clip(x, -1.0, 1.0)}.get(t, lambda x: x)(nrest[k])
-    D = np.array([_derivative(t, np.array(x)) for t, x in zip(transfers, nrest, strict=True)], dtype=float)
+        if k in factors:
+            terms = [v * (1.0 if m == "b" else a[src] if m == "LW" and d == 0 else 0.0)
+                     for m, src, d, v in factors[k]]
+            nrest[k] = float(np.prod(terms))
+            for i, (m, src, d, v) in enumerate(factors[k]):
+                if m == "LW":
+                    L[d, k, src] += v * float(np.prod(terms[:i] + terms[i + 1:]))
+        else:
+            nrest[k] = bias[k] + L[0, k] @ a
+        a[k] = _value(transfers[k], nrest[k])
+    D = np.array([_derivative(t, float(x)) for t, x in zip(transfers, nrest, strict=True)], dtype=float)
     M = np.eye(n) - D[:, None] * L[0]
     blocks = [np.linalg.solve(M, D[:, None] * L[d]) for d in range(1, dmax + 1)]
     companion = np.zeros((n * dmax, n * dmax))

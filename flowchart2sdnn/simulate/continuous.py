@@ -8,7 +8,10 @@ Semantics (the chart in continuous time, sample time ``T = diagram.sample_time``
 * every block's output signal carries its name; a block's operand is ``x = sum_i sign_i * signal_i``;
 * ``sum``: ``x``;  ``gain``: ``k x``;  ``constant``: ``k``;  ``integrator``: state ``s`` with ``ds/dt = x``;
   ``nonlinear``: ``sum_i v_i tanh(a_i x + b_i)``;  ``function``: ``f(k x)`` with ``f`` one of ``tanh``,
-  ``sin``, ``cos``, ``sign_smooth(z) = tanh(z / eps)`` (``eps`` defaults to 1e-3);
+  ``sin``, ``cos``, ``sign_smooth(z) = tanh(z / eps)`` (``eps`` defaults to 1e-3), ``sat(z) = clip(z, -1, 1)``,
+  ``sqrt`` (``sqrt(z)`` for ``z >= eps``, ``-sqrt(-z)`` for ``z <= -eps``, and between them the odd cubic
+  ``sqrt(eps) (5 u - u^3) / 4`` with ``u = z / eps``, which meets both in value and slope), ``abs``, ``exp``,
+  ``square(z) = z^2``, ``signed_square(z) = z |z|``;  ``product``: ``k prod_i sign_i signal_i``;
 * ``delay`` with ``n`` samples: on ``[t_k, t_{k+1})`` its output is its operand sampled at ``t_{k-n}``.
   Before ``t_0`` the operand is taken as its value at ``t_0`` (so the output starts at that value). When the
   operand at ``t_0`` depends on the delay's own output without an integrator in between (a purely discrete
@@ -33,13 +36,14 @@ import numpy as np
 from numba import njit
 
 from ..diagram.model import Block, Diagram, NonlinearWeights
+from .functions import FUNCTION_CODES as _FUNCTION
+from .functions import chart_function
 
 __all__ = ["RelayFeedback", "simulate_continuous"]
 
-SUM, GAIN, INTEGRATOR, DELAY, CONSTANT, NONLINEAR, FUNCTION = range(7)
+SUM, GAIN, INTEGRATOR, DELAY, CONSTANT, NONLINEAR, FUNCTION, PRODUCT = range(8)
 _KIND = {"sum": SUM, "gain": GAIN, "integrator": INTEGRATOR, "delay": DELAY, "constant": CONSTANT,
-         "nonlinear": NONLINEAR, "function": FUNCTION}
-_FUNCTION = {"tanh": 0, "sin": 1, "cos": 2, "sign_smooth": 3, "sat": 4}
+         "nonlinear": NONLINEAR, "function": FUNCTION, "product": PRODUCT}
 _INIT, _SAMPLE, _CONT = 0, 1, 2  # evaluation modes: at t_0, at t_k (k >= 1), inside an interval
 DEFAULT_EPS = 1e-3
 
@@ -82,6 +86,14 @@ def _operand(sig, src, sgn, a, b):
 
 
 @njit(cache=True, inline="always", error_model="numpy")
+def _product(sig, src, sgn, a, b):
+    acc = 1.0
+    for i in range(a, b):
+        acc *= sgn[i] * sig[src[i]]
+    return acc
+
+
+@njit(cache=True, inline="always", error_model="numpy")
 def _evaluate(sig, order, ti, tf, src, sgn, nl, buf, zero0, mode, k):
     for j in order:
         s = ti[j, 0]
@@ -98,6 +110,9 @@ def _evaluate(sig, order, ti, tf, src, sgn, nl, buf, zero0, mode, k):
             else:
                 sig[s] = buf[d, k % np.int64(n)]
             continue
+        if kind == PRODUCT:
+            sig[s] = tf[j, 0] * _product(sig, src, sgn, ti[j, 2], ti[j, 3])
+            continue
         x = _operand(sig, src, sgn, ti[j, 2], ti[j, 3])
         if kind == SUM:
             y = x
@@ -110,18 +125,7 @@ def _evaluate(sig, order, ti, tf, src, sgn, nl, buf, zero0, mode, k):
             for i in range(ti[j, 4], ti[j, 5]):
                 y += nl[i, 2] * math.tanh(nl[i, 0] * x + nl[i, 1])
         else:
-            z = tf[j, 0] * x
-            f = ti[j, 6]
-            if f == 0:
-                y = math.tanh(z)
-            elif f == 1:
-                y = math.sin(z)
-            elif f == 2:
-                y = math.cos(z)
-            elif f == 4:
-                y = min(1.0, max(-1.0, z))
-            else:
-                y = math.tanh(z / tf[j, 1])
+            y = chart_function(ti[j, 6], tf[j, 0] * x, tf[j, 1])
         sig[s] = y
 
 
@@ -299,6 +303,8 @@ def _compile(diagram: Diagram, env: Mapping[str, float], init: Mapping[str, floa
         ti[j, 3] = len(src)
         if kind in (GAIN, CONSTANT):
             tf[j, 0] = _number(b.k, b, "k", env)
+        elif kind == PRODUCT:
+            tf[j, 0] = 1.0 if b.k is None else _number(b.k, b, "k", env)
         elif kind == FUNCTION:
             tf[j, 0] = 1.0 if b.k is None else _number(b.k, b, "k", env)
             if b.f not in _FUNCTION:
