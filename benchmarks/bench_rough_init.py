@@ -17,7 +17,13 @@ within 1.05x of the reference: the lowest of a fit started at the truth (both op
 ``--variant`` runs our LM with one change (see VARIANTS) to measure what closes the gap.
 
 Run: ``python benchmarks/bench_rough_init.py --chart coulomb --n 8 --seconds 30`` (minutes per chart on a
-shared 2-core machine). Measured tables: docs/rough_init.md.
+shared 2-core machine). Measured (seed 1; more in docs/rough_init.md):
+
+| chart, record, draws | trainlm μI (old default) | μD² (default) | scipy trf |
+|---|---|---|---|
+| coulomb, 10 s, N = 3 | 2/3, 167-668 iterations | 3/3, 22-27 | 3/3, 14-24 evaluations |
+| coulomb, 30 s, N = 8 | — | 8/8, median 44, 10.0 s | 8/8, median 21, 2.8 s |
+| learned, 10 s, N = 4 (vs best truth start) | 0/4, 3 of 4 at the 1000 limit | 1/4, 258-337 | 0/4, 116-1000 |
 """
 
 from __future__ import annotations
