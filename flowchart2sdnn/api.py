@@ -22,6 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from .compiler import Compilation, compile_diagram
+from .data.columns import source_header
 from .data.csvdata import TIME_COLUMNS, Dataset
 from .data.csvdata import read_csv as _read_csv_columns
 from .diagnose.loop import DiagnoseSettings, Diagnosis
@@ -47,28 +48,38 @@ def compile_chart(chart: Diagram | str | Path, seed: int = 0) -> Compilation:
 
 
 def read_csv(path: str | Path, map: Mapping[str, str] | None = None, chart: Diagram | str | Path | None = None,
-             sample_time: float | None = None) -> Dataset:
+             sample_time: float | None = None, units: Mapping[str, str] | None = None) -> Dataset:
     """A record from a CSV file: every column (or only the ones `chart` needs), checked value by value.
 
     Parameters
     ----------
     path : str or Path
     map : {name: header}, optional
-        Read chart signal `name` from CSV column `header` (``{"time": header}`` names the time column).
+        Read chart signal `name` from CSV column `header` (``{"time": header}`` names the time column), or from
+        a column expression: a header times or divided by constants (``{"w1": "speed_rpm*2*pi/60"}``).
     chart : Diagram or path, optional
         Keep only the columns this chart needs (and check its sample time against the time column).
     sample_time : float, optional
         Expected time step in seconds (default: the chart's, else the median step of the time column).
+    units : {column: unit}, optional
+        Columns logged in another unit than the chart's (``{"speed_rpm": "rpm", "t_ms": "ms"}``), converted to
+        the chart's unit of the signal they feed; needs `chart`. ValueError naming an item that does not fit.
     """
     mapping = dict(map or {})
     if chart is not None:
         diagram = _chart(chart)
+        from .analysis.dataunits import unit_scales
         from .identify.problem import required_columns
 
-        return _read_csv_columns(path, required_columns(diagram), mapping, sample_time or diagram.sample_time)
+        scale = unit_scales(diagram, units or {}, mapping)
+        return _read_csv_columns(path, required_columns(diagram), mapping, sample_time or diagram.sample_time,
+                                 scale=scale)
+    if units:
+        raise ValueError("units need the chart whose units the columns are converted to (give chart=...)")
     header = _header(path)
-    mapped_from = set(mapping.values())
-    time_header = mapping.get("time") or next((h for h in header if h.lower() in TIME_COLUMNS), None)
+    mapped_from = set(mapping.values()) | {source_header(h) for h in mapping.values()}
+    time_header = source_header(mapping["time"]) if "time" in mapping else \
+        next((h for h in header if h.lower() in TIME_COLUMNS), None)
     names = [n for n in mapping if n != "time"]
     names += [h for h in header if h not in mapped_from and h != time_header and h not in names]
     return _read_csv_columns(path, names, mapping, sample_time)

@@ -68,7 +68,6 @@ CASES = [
     (BAD_ID / "nan_in_output.csv", ENGINE, [], "CSV005", 6, "column 'w1'"),
     (BAD_ID / "text_in_input.csv", ENGINE, [], "CSV004", 4, "column 'M1'"),
     (BAD_ID / "good_small.csv", ENGINE, ["--map", "w1=speed"], "CSV016", 1, "'speed'"),
-    (BAD_ID / "good_small.csv", ENGINE, ["--map", "w1"], "CSV024", None, "w1"),
     (BAD_ID / "good_small.csv", ENGINE, ["--map", "torque=M1"], "CSV025", None, "torque"),
     (BAD_ID / "good_small.csv", ENGINE, ["--map", "time=t"], "CSV016", 1, "'t'"),
 ]
@@ -90,13 +89,21 @@ def test_malformed_data_gives_one_line_and_leaves_no_file(case, tmp_path):
     assert len(lines) == 1, res.stderr
     message = lines[0]
     assert f"error[{code}]" in message
-    if code not in ("CSV024", "CSV025"):  # option errors name the option, not a file
+    if code != "CSV025":  # option errors name the option, not a file
         prefix = f"{data}:{line}: " if line is not None else f"{data}: "
         assert message.startswith(prefix), message
     if column is not None:
         assert column in message
     assert "Traceback" not in res.output
     assert list(out.iterdir()) == []  # neither RESULT.json, nor the chart, nor temporary files
+
+
+def test_a_map_item_without_equals_is_a_usage_error(tmp_path):
+    res = CliRunner().invoke(main, ["identify", str(BAD_ID / "good_small.csv"), "--diagram", str(ENGINE),
+                                    "-o", str(tmp_path / "r.json"), "--map", "w1"])
+    assert res.exit_code == 2, res.output
+    assert "Invalid value for '--map': 'w1' is not NAME=HEADER" in res.stderr
+    assert list(tmp_path.iterdir()) == []
 
 
 def test_at_least_twenty_cases_name_line_and_column():

@@ -43,6 +43,7 @@ class BatchSettings:
     ----------
     identify : IdentifySettings   the same for every file
     mapping : tuple of (name, column)  ``--map`` items
+    scales : tuple of (name, factor)   ``--unit`` conversions (see analysis.dataunits.unit_scales)
     retry_errors : bool           redo files whose row is an error
     force : bool                  discard a table written with another configuration
     diagnose : bool               also run flowchart2sdnn.diagnose on each file; its accepted effects go to the
@@ -51,6 +52,7 @@ class BatchSettings:
 
     identify: IdentifySettings = field(default_factory=IdentifySettings)
     mapping: tuple[tuple[str, str], ...] = ()
+    scales: tuple[tuple[str, float], ...] = ()
     retry_errors: bool = False
     force: bool = False
     diagnose: bool = False
@@ -96,6 +98,8 @@ def config_key(diagram: Diagram, settings: BatchSettings) -> str:
     h = hashlib.sha256(dump_diagram(diagram).encode())
     h.update(json.dumps(asdict(settings.identify), sort_keys=True, default=list).encode())
     h.update(json.dumps(sorted(settings.mapping)).encode())
+    if settings.scales:  # absent from the key without --unit: tables written before it stay valid
+        h.update(json.dumps(sorted(settings.scales)).encode())
     if settings.diagnose:
         h.update(b"diagnose")
     return h.hexdigest()[:16]
@@ -298,7 +302,7 @@ def _run(diagram: Diagram, files: Sequence[str], output: str, settings: BatchSet
             record({**by_sha[sha], "file": file, "seconds": 0.0}, "copied")
             return None
         try:
-            data = read_csv(file, needed, mapping, diagram.sample_time)
+            data = read_csv(file, needed, mapping, diagram.sample_time, scale=dict(settings.scales))
         except SdnnError as exc:
             record(_error_row(file, sha, config, _message(exc)), "failed")
             return None

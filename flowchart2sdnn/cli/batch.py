@@ -14,10 +14,11 @@ import click
 from ..errors import SdnnError
 from .options import (
     alignment_option,
+    column_reading,
+    data_options,
     executor_options,
     force_option,
     handle_errors,
-    map_option,
     max_iter_option,
     seed_option,
     settings_usage,
@@ -69,7 +70,7 @@ def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> li
                  "limit is reported as not converged.", default=1000)
 @alignment_option(None)
 @substeps_option()
-@map_option()
+@data_options
 @click.option("--retry-errors", is_flag=True, help="Redo files whose earlier row is an error.")
 @force_option("Start the results table over (it holds other settings).")
 @click.option("--diagnose", is_flag=True,
@@ -77,14 +78,13 @@ def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> li
 @click.option("--quiet", is_flag=True, help="No progress bar and no summary.")
 @handle_errors
 def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_iter, alignment, substeps, mapping,
-          retry_errors, force, diagnose, quiet) -> None:
+          units, retry_errors, force, diagnose, quiet) -> None:
     """Identify CHART on every DATA file (paths, directories or quoted globs): one row per file in OUTPUT.
 
     Rerunning the same command skips the files already done, so an interrupted run resumes.
     """
     from ..atomic import check_output_path
     from ..batch.run import BatchSettings, run_batch
-    from ..data.csvdata import parse_mapping
     from ..diagram.validate import load_diagram
     from ..executors import make_executor
     from ..identify.document import fix_from_result
@@ -98,11 +98,12 @@ def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_i
     fixed: list[str] = []
     if fix_from:
         diagram, fixed = fix_from_result(diagram, fix_from)
+    maps, scales = column_reading(diagram, mapping, units)
     with settings_usage():
         settings = BatchSettings(
             identify=IdentifySettings(starts=starts, seed=seed, max_iter=max_iter, alignment=alignment,
                                       fixed_from=tuple(fixed)),
-            mapping=tuple(sorted(parse_mapping(mapping).items())), retry_errors=retry_errors, force=force,
+            mapping=tuple(sorted(maps.items())), scales=tuple(sorted(scales.items())), retry_errors=retry_errors, force=force,
             diagnose=diagnose)
     bar = BatchBar(len(files), quiet)
     with make_executor(workers, scheduler) as executor:

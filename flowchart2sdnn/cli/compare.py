@@ -11,7 +11,7 @@ import json
 import click
 
 from ..strictjson import strict_json
-from .options import alignment_option, force_option, handle_errors, map_option
+from .options import alignment_option, column_reading, data_options, force_option, handle_errors
 
 __all__ = ["compare"]
 
@@ -27,18 +27,18 @@ __all__ = ["compare"]
 @click.option("--diagram", "chart", type=click.Path(dir_okay=False),
               help="With a RESULT.json: put its values into this chart instead of the identified chart beside it.")
 @alignment_option("Input alignment (default: the fit's with a RESULT.json, else zoh).", default=None)
-@map_option()
+@data_options
 @click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text", show_default=True)
 @force_option("Overwrite an existing figure.")
 @handle_errors
-def compare(model, data, horizon, output, chart, alignment, mapping, fmt, force) -> None:
+def compare(model, data, horizon, output, chart, alignment, mapping, units, fmt, force) -> None:
     """Compare MODEL (a chart, or a RESULT.json with its identified chart) with the measured outputs of DATA
     (CSV records): fit % and RMS per record and output."""
     from pathlib import Path
 
     from ..atomic import check_output_path
     from ..compiler import compile_diagram
-    from ..data.csvdata import parse_mapping, read_csv
+    from ..data.csvdata import read_csv
     from ..identify.compare import compare_records
     from ..identify.document import read_model
     from ..identify.problem import required_columns
@@ -52,8 +52,8 @@ def compare(model, data, horizon, output, chart, alignment, mapping, fmt, force)
         check_output_path(output, [model, *data] + ([chart] if chart else []), force=force)
     diagram, result = read_model(model, chart)
     alignment = alignment or (result.settings.alignment if result is not None else "zoh")
-    maps = parse_mapping(mapping)
-    records = [(Path(d).name, read_csv(d, required_columns(diagram), maps, diagram.sample_time), 0) for d in data]
+    maps, scales = column_reading(diagram, mapping, units)
+    records = [(Path(d).name, read_csv(d, required_columns(diagram), maps, diagram.sample_time, scale=scales), 0) for d in data]
     compiled = CompiledNetwork(compile_diagram(diagram).network)
     comparison = compare_records(compiled, compiled.theta0(), records, alignment, horizon, diagram)
     if output:

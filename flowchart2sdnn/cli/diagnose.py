@@ -14,11 +14,14 @@ import click
 from ..strictjson import strict_json
 from .options import (
     alignment_option,
+    column_reading,
+    data_options,
     executor_options,
     force_option,
     handle_errors,
-    map_option,
+    html_option,
     max_iter_option,
+    require_figures,
     seed_option,
     settings_usage,
     substeps_option,
@@ -86,19 +89,20 @@ def _int_list(text: str) -> tuple[int, ...]:
               help="cogging harmonics p to try.")
 @alignment_option()
 @substeps_option()
-@map_option()
+@data_options
 @seed_option("Seed for initial curves.")
+@html_option()
 @force_option()
 @click.option("--quiet", is_flag=True, help="No progress and no report text.")
 @executor_options("the candidate refits")
 @handle_errors
 def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
              refit_iter, max_iter, horizon, top, criterion, min_gain, alpha, dead_time_max, harmonics, alignment,
-             substeps, mapping, seed, force, quiet, workers=None, scheduler=None) -> None:
+             substeps, mapping, units, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
     """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
     chart, refit, and report the error before and after."""
     from ..atomic import atomic_write_text, check_output_path
-    from ..data.csvdata import parse_mapping, read_csv
+    from ..data.csvdata import read_csv
     from ..diagnose.effects import effect_library, select_effects
     from ..diagnose.loop import DiagnoseSettings
     from ..diagnose.loop import diagnose as run_diagnose
@@ -111,15 +115,12 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
         raise click.UsageError("give either --validate or --split, not both")
     cogging_p = _int_list(harmonics)
     inputs = list(data) + [chart] + list(validation) + ([effects_file] if effects_file else [])
-    for path in (output, report_path):
+    for path in (output, report_path, html_path):
         if path:
             check_output_path(path, inputs, force=force)
     if output and report_path and output == report_path:
         raise click.UsageError("-o and --report name the same file")
-    if plots:
-        from ..identify.plots import require_matplotlib
-
-        require_matplotlib()
+    require_figures(plots, html_path)
     user = {}
     if effects_file:
         from ..diagnose.usereffects import load_effects_file
@@ -131,10 +132,10 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
         raise click.UsageError(f"{effects_file}: {exc}") from None
     effects = select_effects(parse_effects(effect_names), library)
     diagram = with_substeps(load_diagram(chart), substeps)
-    maps = parse_mapping(mapping)
+    maps, scales = column_reading(diagram, mapping, units)
     cols = required_columns(diagram)
-    train = [read_csv(d, cols, maps, diagram.sample_time) for d in data]
-    val = [read_csv(v, cols, maps, diagram.sample_time) for v in validation]
+    train = [read_csv(d, cols, maps, diagram.sample_time, scale=scales) for d in data]
+    val = [read_csv(v, cols, maps, diagram.sample_time, scale=scales) for v in validation]
     with settings_usage():
         settings = DiagnoseSettings(rounds=rounds, top=top, refit_iter=refit_iter, max_iter=max_iter,
                                     alpha=alpha, criterion=criterion, min_gain=min_gain, alignment=alignment,
@@ -174,6 +175,12 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
         from ..diagnose.plots import write_plots
 
         written = write_plots(outcome, train[0], plots)
+    if html_path:
+        from ..diagnose.html import diagnosis_html
+        from ..identify.html import write_html
+
+        written.append(write_html(html_path, diagnosis_html(outcome, train[0], val,
+                                                            f"sdnn diagnose {' '.join(data)} --diagram {chart}")))
     if not quiet:
         click.echo(format_report(report), nl=False)
         for path in [p for p in (output, report_path) if p] + [str(w) for w in written]:

@@ -13,11 +13,14 @@ import click
 
 from .options import (
     alignment_option,
+    column_reading,
+    data_options,
     executor_options,
     force_option,
     handle_errors,
-    map_option,
+    html_option,
     max_iter_option,
+    require_figures,
     seed_option,
     settings_usage,
     substeps_option,
@@ -54,20 +57,22 @@ __all__ = ["identify"]
                  "limit is reported as not converged.", default=1000)
 @alignment_option()
 @substeps_option()
-@map_option()
+@data_options
 @click.option("--plots", type=click.Path(file_okay=False),
               help="Directory for the figures (PNG; created if needed, figures of the same name replaced). "
                    "Needs matplotlib: pip install flowchart2sdnn[plots].")
+@html_option()
 @force_option()
 @click.option("--quiet", is_flag=True, help="No progress and no table.")
 @executor_options("the multi-start fits")
 @handle_errors
 def identify(data, chart, output, fix_from, validation, init_window, split, starts, seed, online, window, average,
-             max_iter, alignment, substeps, mapping, plots, force, quiet, workers=None, scheduler=None) -> None:
+             max_iter, alignment, substeps, mapping, units, plots, html_path, force, quiet, workers=None,
+             scheduler=None) -> None:
     """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
     together, each simulated from its own initial state)."""
     from ..atomic import atomic_write_text, check_output_path
-    from ..data.csvdata import parse_mapping, read_csv
+    from ..data.csvdata import read_csv
     from ..diagram.dump import dump_diagram
     from ..diagram.validate import load_diagram
     from ..errors import SdnnError
@@ -82,23 +87,22 @@ def identify(data, chart, output, fix_from, validation, init_window, split, star
     if init_window and not validation:
         raise click.UsageError("--init-window sets the initial state of the --validate record: give one")
     inputs = [*data, chart] + [p for p in (fix_from, validation) if p]
-    if plots:
-        from ..identify.plots import require_matplotlib
-
-        require_matplotlib()  # before any work: a missing extra must not cost a whole run
+    require_figures(plots, html_path)  # before any work: a missing extra must not cost a whole run
     chart_out = None
     if output:
         chart_out = str(Path(output).with_suffix("")) + ".chart.yaml"
         check_output_path(output, inputs, force=force)
         check_output_path(chart_out, inputs, force=force)
+    if html_path:
+        check_output_path(html_path, inputs, force=force)
     diagram = with_substeps(load_diagram(chart), substeps)
     fixed = []
     if fix_from:
         diagram, fixed = fix_from_result(diagram, fix_from)
-    maps = parse_mapping(mapping)
+    maps, scales = column_reading(diagram, mapping, units)
     cols = required_columns(diagram)
-    train = [read_csv(d, cols, maps, diagram.sample_time) for d in data]
-    val = read_csv(validation, cols, maps, diagram.sample_time) if validation else None
+    train = [read_csv(d, cols, maps, diagram.sample_time, scale=scales) for d in data]
+    val = read_csv(validation, cols, maps, diagram.sample_time, scale=scales) if validation else None
     with settings_usage():
         settings = IdentifySettings(starts=starts, seed=seed, max_iter=max_iter, alignment=alignment, split=split,
                                     online=online, window=window, average=average, fixed_from=tuple(fixed),
@@ -122,27 +126,36 @@ def identify(data, chart, output, fix_from, validation, init_window, split, star
                            hint="the start values make the model unstable on this data: change 'init'")
     if output:
         extra = {"command": {"data": data[0] if len(data) == 1 else list(data), "diagram": chart,
-                             "fix_from": fix_from, "validate": validation, "map": dict(maps)},
+                             "fix_from": fix_from, "validate": validation, "map": dict(maps),
+                             **({"unit": dict(u.split("=", 1) for u in units)} if units else {})},
                  "identified_chart": chart_out}
         # both texts first: a failure here must not leave one file without the other
         chart_text = dump_diagram(outcome.diagram, {"from": output, "status": outcome.status})
         result_text = dumps({**outcome.to_document(), **extra})
         atomic_write_text(chart_out, chart_text)
         atomic_write_text(output, result_text)
-    if plots:
-        from ..identify.plots import write_plots
-
+    if plots or html_path:
         records = [(f"training: {Path(d.path).name}", d, 0) for d in train]
         checks = [(f"validation: {Path(val.path).name}", val, 0)] if val is not None else []
         if split:  # as identify splits: the free run over the whole record, shown and scored after the split
             n = max(3, int(round(split * train[0].n_rows)))
             records = [(records[0][0], train[0].slice(0, n), 0)]
             checks = [(f"validation: {Path(train[0].path).name} after the split", train[0], n)]
+    if plots:
+        from ..identify.plots import write_plots
+
         write_plots(outcome, plots, records, checks)
+    if html_path:
+        from ..identify.html import identification_html, write_html
+
+        write_html(html_path, identification_html(outcome, records, checks, fixed,
+                                                  f"sdnn identify {' '.join(data)} --diagram {chart}"))
     if not quiet:
         click.echo(format_result(outcome, fixed), nl=False)
         if output:
             click.echo(f"wrote {output} and {chart_out}")
+        if html_path:
+            click.echo(f"wrote {html_path}")
     if outcome.converged is False and outcome.status != "interrupted":
         click.echo(f"warning: not converged: {outcome.message} (raise --max-iter, or start closer)", err=True)
     if outcome.status == "interrupted":

@@ -12,7 +12,7 @@ import json
 import click
 
 from ..strictjson import strict_json
-from .options import force_option, handle_errors, map_option
+from .options import column_reading, data_options, force_option, handle_errors
 
 __all__ = ["linearize"]
 
@@ -36,11 +36,11 @@ def _matrix(name: str, m, rows, cols) -> str:
               help="Write the Bode figure (PNG), over the frequency response estimated from DATA when given.")
 @click.option("--diagram", "chart", type=click.Path(dir_okay=False),
               help="With a RESULT.json: put its values into this chart instead of the identified chart beside it.")
-@map_option()
+@data_options
 @click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text", show_default=True)
 @force_option()
 @handle_errors
-def linearize(model, data, at, kink, control_path, bode, chart, mapping, fmt, force) -> None:
+def linearize(model, data, at, kink, control_path, bode, chart, mapping, units, fmt, force) -> None:
     """Linearise MODEL (an identified chart, or a RESULT.json with it) at an operating point: the continuous
     state-space model, its poles with natural frequencies and damping ratios. DATA (CSV records) feed the
     measured frequency response of --bode."""
@@ -73,14 +73,14 @@ def linearize(model, data, at, kink, control_path, bode, chart, mapping, fmt, fo
 
         write_state_space(lin, control_path)
     if bode:
-        from ..data.csvdata import parse_mapping, read_csv
+        from ..data.csvdata import read_csv
         from ..identify.bode import empirical_response, write_bode
         from ..identify.problem import required_columns
 
         estimates = []
-        maps = parse_mapping(mapping)
+        maps, scales = column_reading(diagram, mapping, units)
         for d in data:
-            ds = read_csv(d, required_columns(diagram), maps, diagram.sample_time)
+            ds = read_csv(d, required_columns(diagram), maps, diagram.sample_time, scale=scales)
             for o in lin.outputs:
                 for i in lin.inputs:
                     estimates.append(empirical_response(ds.columns[i], ds.columns[o], diagram.sample_time, i, o))

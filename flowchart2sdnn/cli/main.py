@@ -24,9 +24,10 @@ from .identify import identify
 from .linearize import linearize
 from .options import (
     alignment_option,
+    column_reading,
+    data_options,
     force_option,
     handle_errors,
-    map_option,
     seed_option,
     settings_usage,
     substeps_option,
@@ -110,15 +111,15 @@ def compile_(chart: str, output: str | None, explain: bool, dot: str | None, see
 @click.option("--signals", type=click.Choice(["outputs", "all"]), default="outputs", show_default=True)
 @alignment_option()
 @substeps_option()
-@map_option("Take chart signal NAME from COLUMN.")
+@data_options
 @force_option("Overwrite an existing output file.")
 @handle_errors
-def simulate(chart, data, output, params, continuous, signals, alignment, substeps, mapping, force) -> None:
+def simulate(chart, data, output, params, continuous, signals, alignment, substeps, mapping, units, force) -> None:
     """Run CHART on the inputs in DATA (CSV) and write time and output columns."""
     import numpy as np
 
     from ..atomic import check_output_path
-    from ..data.csvdata import parse_mapping, read_csv, write_csv
+    from ..data.csvdata import read_csv, write_csv
     from ..diagram.validate import load_diagram
     from ..simulate.run import simulate_chart, simulation_columns
 
@@ -129,7 +130,8 @@ def simulate(chart, data, output, params, continuous, signals, alignment, subste
         from ..identify.document import apply_result_file
 
         diagram = apply_result_file(diagram, params)
-    ds = read_csv(data, simulation_columns(diagram), parse_mapping(mapping), diagram.sample_time)
+    maps, scales = column_reading(diagram, mapping, units)
+    ds = read_csv(data, simulation_columns(diagram), maps, diagram.sample_time, scale=scales)
     columns = simulate_chart(diagram, ds, alignment=alignment, continuous=continuous, all_signals=signals == "all")
     if output:
         write_csv(output, columns)

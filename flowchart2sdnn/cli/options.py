@@ -20,7 +20,8 @@ import click
 from ..errors import SdnnError
 
 __all__ = ["fail", "handle_errors", "settings_usage", "executor_options", "force_option", "seed_option",
-           "map_option", "alignment_option", "max_iter_option", "substeps_option", "with_substeps", "ALIGNMENT_HELP"]
+           "map_option", "unit_option", "data_options", "column_reading", "alignment_option", "max_iter_option",
+           "substeps_option", "with_substeps", "ALIGNMENT_HELP", "html_option", "require_figures"]
 
 ALIGNMENT_HELP = "zoh: input sample k acts on [t_k, t_k+1) (logged data); direct: output k uses input k."
 
@@ -101,9 +102,60 @@ def seed_option(help: str | None = None):
     return click.option("--seed", type=int, default=0, show_default=True, help=help)
 
 
-def map_option(help: str = "Take chart signal NAME from CSV column COLUMN (repeatable)."):
+MAP_HELP = ("Take chart signal NAME from CSV column COLUMN, or from a column expression: a header times or divided "
+            "by constants, e.g. w1=speed_rpm*2*pi/60 (repeatable).")
+
+
+def _check_map(ctx, param, value):
+    """Option syntax first (exit 2): NAME=COLUMN items, no name mapped twice."""
+    from ..data.csvdata import parse_mapping
+
+    try:
+        parse_mapping(value)
+    except SdnnError as exc:
+        message = exc.diagnostics[0].message
+        raise click.BadParameter(message.removeprefix("--map "), ctx=ctx, param=param) from None
+    return value
+
+
+def map_option(help: str = MAP_HELP):
     """``--map NAME=COLUMN`` (repeatable), passed on as ``mapping``; see data.csvdata.parse_mapping."""
-    return click.option("--map", "mapping", multiple=True, metavar="NAME=COLUMN", help=help)
+    return click.option("--map", "mapping", multiple=True, metavar="NAME=COLUMN", help=help, callback=_check_map)
+
+
+def _check_units(ctx, param, value):
+    from ..analysis.dataunits import parse_unit_items
+
+    try:
+        parse_unit_items(value)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), ctx=ctx, param=param) from None
+    return value
+
+
+def unit_option():
+    """``--unit COLUMN=UNIT`` (repeatable): convert a logged column to the chart's unit; see analysis.dataunits."""
+    return click.option("--unit", "units", multiple=True, metavar="COLUMN=UNIT", callback=_check_units,
+                        help="Column COLUMN is logged in UNIT (rpm, mm, ms, deg, ...): convert it to the chart's "
+                             "unit of the signal it feeds (repeatable).")
+
+
+def data_options(func):
+    """``--map`` and ``--unit`` together: how a command reads the columns of its CSV files."""
+    return map_option()(unit_option()(func))
+
+
+def column_reading(diagram, mapping, units) -> tuple[dict[str, str], dict[str, float]]:
+    """The parsed ``--map`` and the factor per signal of ``--unit`` against `diagram` (a usage error naming
+    --unit when a unit does not fit the chart)."""
+    from ..analysis.dataunits import parse_unit_items, unit_scales
+    from ..data.csvdata import parse_mapping
+
+    maps = parse_mapping(mapping)
+    try:
+        return maps, unit_scales(diagram, parse_unit_items(units), maps)
+    except ValueError as exc:
+        raise click.BadParameter(str(exc), param_hint="'--unit'") from None
 
 
 def alignment_option(help: str | None = ALIGNMENT_HELP, default: str | None = "zoh"):
@@ -145,6 +197,21 @@ def with_substeps(diagram, substeps):
     from dataclasses import replace
 
     return replace(diagram, substeps=substeps)
+
+
+def html_option():
+    """``--html REPORT.html``: the run as one self-contained page (figures embedded; needs matplotlib)."""
+    return click.option("--html", "html_path", type=click.Path(dir_okay=False),
+                        help="Write the run as one self-contained HTML page: tables and figures embedded "
+                             "(needs matplotlib: pip install flowchart2sdnn[plots]).")
+
+
+def require_figures(plots, html_path) -> None:
+    """Check matplotlib before any work when figures or a page are asked for (PLOT001 naming the option)."""
+    if plots or html_path:
+        from ..identify.plots import require_matplotlib
+
+        require_matplotlib("--plots" if plots else "--html")
 
 
 def max_iter_option(help: str | None = None, default: int = 100):

@@ -7,7 +7,10 @@ surrounding blanks. Only the columns a chart needs (and the time column) are kep
 than the kept columns. Numbers are plain ASCII decimals (``1.5``, ``-2e-3``); NaN, infinities, empty cells,
 ``_`` separators and non-ASCII digits are refused.
 
-A column is found by the chart's name, or by the header that ``mapping[name]`` names. The time column is
+A column is found by the chart's name, or by the header that ``mapping[name]`` names, or by a column
+expression there (``speed_rpm*2*pi/60``: a header times or divided by constants, see :mod:`.columns`);
+``scale[name]`` multiplies a column further (a unit conversion). Scaled values are what the Dataset holds,
+and the time column is checked after its scale. The time column is
 ``mapping["time"]`` when given, else the first of :data:`TIME_COLUMNS` present (case-insensitive). Its steps
 must be positive and lie within ``jitter_tolerance`` (relative) of the sample time, which is ``sample_time``
 when given and the median step otherwise; the largest deviation seen is reported in the :class:`Dataset`.
@@ -46,6 +49,7 @@ CSV023  no header row: the first row holds numbers
 CSV024  a ``--map`` item is not ``NAME=HEADER``, or maps one name twice
 CSV025  the mapping names something the chart does not need
 CSV026  ``sample_time`` is not a positive finite number
+CSV027  a mapping target is neither a header nor a column expression (a header times/divided by constants)
 ======  ==============================================================================
 """
 
@@ -54,6 +58,7 @@ from __future__ import annotations
 import bisect
 import codecs
 import csv
+import dataclasses
 import hashlib
 import io
 import math
@@ -68,6 +73,9 @@ import numpy as np
 
 from flowchart2sdnn.atomic import atomic_open
 from flowchart2sdnn.errors import SdnnError, did_you_mean
+from flowchart2sdnn.expr import ExprError
+
+from .columns import EXAMPLE, column_scale
 
 __all__ = ["TIME_COLUMNS", "Dataset", "read_csv", "parse_mapping", "write_csv"]
 
@@ -99,6 +107,9 @@ class Dataset:
         Hex digest of the file's bytes.
     source_columns : dict of str to str
         Requested name -> the CSV header it came from.
+    scales : dict of str to float
+        Requested name (or ``"time"``) -> the factor its column was multiplied by (a column expression of the
+        mapping times a ``scale``); names read as logged are absent.
     """
 
     path: str
@@ -109,6 +120,7 @@ class Dataset:
     max_step_deviation: float | None
     sha256: str
     source_columns: dict[str, str]
+    scales: dict[str, float] = dataclasses.field(default_factory=dict)
 
     def slice(self, start: int | None, stop: int | None) -> Dataset:
         """Rows ``start:stop`` (Python slice rules) as a new Dataset sharing the read-only arrays."""
@@ -301,10 +313,17 @@ def _check_file(file: str, max_bytes: int) -> int:
     return info.st_size
 
 
+def _is_expression(target: str) -> bool:
+    """Whether a mapping target that is not a header is read as a column expression (it has an operator)."""
+    return any(op in target for op in "*/^") or target.lstrip().startswith("-")
+
+
 def _resolve(
-    file: str, header: list[str], line: int, required: Sequence[str], mapping: Mapping[str, str]
+    file: str, header: list[str], line: int, required: Sequence[str], mapping: Mapping[str, str],
+    factors: dict[str, float],
 ) -> tuple[dict[str, int], int | None, dict[str, str]]:
-    """Column index per required name, the time column's index, and the header each name reads."""
+    """Column index per required name, the time column's index, and the header each name reads; the factor
+    of every column expression is put into `factors`."""
     if len(header) == 1:
         found = [label for sep, label in _OTHER_DELIMITERS.items() if sep in header[0]]
         if not found and len(header[0].split()) > 1:
@@ -319,14 +338,26 @@ def _resolve(
     positions: dict[str, list[int]] = {}
     for index, name in enumerate(header):
         positions.setdefault(name, []).append(index)
+    targets: dict[str, str] = {}
     for name, target in mapping.items():
-        if target not in positions:
-            raise _fail("CSV016", f"the mapping {name}={target} names header '{target}', which the file does "
-                        f"not have ({_headers_found(header)})", file, line, hint=_suggest(target, header))
+        targets[name], factor = target, 1.0
+        if target not in positions and _is_expression(target):
+            try:
+                targets[name], factor = column_scale(target)
+            except ExprError as exc:
+                raise _fail("CSV027", f"the mapping {name}={target}: '{target}' is neither a header of the file "
+                            f"nor a column expression: {exc.message} (expected a header, or a header times or "
+                            f"divided by constants such as {EXAMPLE})", file, line) from None
+            if factor != 1.0:
+                factors[name] = factor
+        if targets[name] not in positions:
+            missing = targets[name]
+            raise _fail("CSV016", f"the mapping {name}={target} names header '{missing}', which the file does "
+                        f"not have ({_headers_found(header)})", file, line, hint=_suggest(missing, header))
     sources: dict[str, str] = {}
     users: dict[str, str] = {}
     for name in [*required, *(["time"] if "time" in mapping else [])]:
-        source = mapping.get(name, name)
+        source = targets.get(name, name)
         if source not in positions:
             hint = _suggest(source, header) or f"map it with --map {name}=HEADER"
             raise _fail("CSV012", f"column '{name}' is missing ({_headers_found(header)})", file, line, hint=hint)
@@ -495,6 +526,7 @@ def read_csv(
     min_rows: int = 3,
     max_bytes: int = 2_000_000_000,
     jitter_tolerance: float = 0.01,
+    scale: Mapping[str, float] | None = None,
 ) -> Dataset:
     """Read the columns a chart needs from a CSV file, checking everything a user could get wrong.
 
@@ -506,7 +538,8 @@ def read_csv(
         The chart's names of the columns to keep.
     mapping : mapping of str to str, optional
         ``mapping[name] = header`` reads ``name`` from another header; ``mapping["time"]`` names the time
-        column explicitly (see :func:`parse_mapping`).
+        column explicitly (see :func:`parse_mapping`). A target that is not a header of the file and holds an
+        operator is a column expression: ``{"w1": "speed_rpm*2*pi/60"}`` (see :mod:`.columns`).
     sample_time : float, optional
         Expected time step in seconds; each step of the time column must lie within ``jitter_tolerance``
         of it. Without it the steps are checked against their median.
@@ -516,6 +549,9 @@ def read_csv(
         Larger files are refused before reading.
     jitter_tolerance : float
         Allowed relative deviation of each time step (0.01 = 1 %).
+    scale : mapping of str to float, optional
+        ``scale[name]`` multiplies the column read for ``name`` (or the time column, ``"time"``), e.g. a unit
+        conversion (see :func:`flowchart2sdnn.analysis.dataunits.unit_scales`).
 
     Returns
     -------
@@ -530,6 +566,13 @@ def read_csv(
     required = list(dict.fromkeys(required))
     mapping = dict(mapping or {})
     _check_options(file, required, mapping, sample_time, min_rows, jitter_tolerance)
+    scale = dict(scale or {})
+    for name, factor in scale.items():
+        if name not in required and name != "time":
+            raise ValueError(f"scale names '{name}', which is not read (read: {', '.join(required)}, time)")
+        if not (isinstance(factor, (int, float)) and math.isfinite(factor) and factor != 0):
+            raise ValueError(f"scale of '{name}' must be a finite non-zero number, not {factor!r}")
+    factors: dict[str, float] = {}
     sample_time = None if sample_time is None else float(sample_time)
     if _check_file(file, max_bytes) == 0:
         raise _fail("CSV007", "the file is empty (expected a header row naming the columns)", file)
@@ -545,7 +588,7 @@ def read_csv(
                     break
             if header is None:
                 raise _fail("CSV007", "the file holds no header row (expected column names)", file)
-            index, time_field, sources = _resolve(file, header, start, required, mapping)
+            index, time_field, sources = _resolve(file, header, start, required, mapping, factors)
             fields = {*index.values(), *([time_field] if time_field is not None else [])}
             rows = _Rows(file, header, list(fields), start + 1)
             rows.read(reader, line)
@@ -567,20 +610,43 @@ def read_csv(
         raise _fail("CSV009", f"{rows.n} data row{'s' if rows.n != 1 else ''}, fewer than the {min_rows} needed",
                     file)
     arrays = rows.arrays()
+    for name, factor in scale.items():
+        factors[name] = factors.get(name, 1.0) * float(factor)
+    columns = {name: arrays[field] for name, field in index.items()}
     time = arrays[time_field] if time_field is not None else None
+    for name, factor in factors.items():
+        if name == "time" and name not in index:
+            time = _scaled(rows, time, factor, time_field) if time is not None else None
+        else:
+            columns[name] = _scaled(rows, columns[name], factor, index[name])
     deviation = None
     if time is not None:
         sample_time, deviation = _check_time(rows, time, time_field, sample_time, jitter_tolerance)
     return Dataset(
         path=file,
-        columns={name: arrays[field] for name, field in index.items()},
+        columns=columns,
         time=time,
         n_rows=rows.n,
         sample_time=sample_time,
         max_step_deviation=deviation,
         sha256=sha256,
         source_columns=sources,
+        scales={name: f for name, f in factors.items() if f != 1.0},
     )
+
+
+def _scaled(rows: _Rows, values: np.ndarray, factor: float, field: int) -> np.ndarray:
+    """`values` times `factor` (read-only), refusing a product that overflows."""
+    if factor == 1.0:
+        return values
+    with np.errstate(over="ignore"):
+        out = values * factor
+    bad = np.flatnonzero(~np.isfinite(out))
+    if len(bad):
+        raise _fail("CSV005", f"{rows.column_name(field)}: {values[bad[0]]!r} times the scale {factor:.6g} is not "
+                    "a finite number (expected a smaller value or scale)", rows.file, rows.line_of(int(bad[0])))
+    out.flags.writeable = False
+    return out
 
 
 def write_csv(path: str | os.PathLike, columns: Mapping[str, np.ndarray], float_format: str = "%.10g") -> None:

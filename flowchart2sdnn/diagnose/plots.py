@@ -19,11 +19,11 @@ import numpy as np
 from ..atomic import atomic_write_bytes
 from ..data.csvdata import Dataset
 from ..identify.compare import signal_units
-from ..identify.figures import write_resid
+from ..identify.figures import resid_figure, safe_name
 from ..identify.problem import build_problem
 from .loop import Diagnosis, Fitted
 
-__all__ = ["write_plots"]
+__all__ = ["write_plots", "figures"]
 
 _MAX_POINTS = 20000
 
@@ -57,10 +57,9 @@ def _traces(f: Fitted, train: Dataset, alignment: str, seed: int):
     return e, sig, problem.compiled.output_names
 
 
-def write_plots(diagnosis: Diagnosis, train: Dataset, directory: str | Path) -> list[Path]:
-    """Write the figures; returns the paths written. Needs matplotlib (checked by the CLI first)."""
-    directory = Path(directory)
-    directory.mkdir(parents=True, exist_ok=True)
+def figures(diagnosis: Diagnosis, train: Dataset, resid: bool = True) -> list[tuple[str, object]]:
+    """(file name, matplotlib Figure) of every figure of the module docstring; `resid` False leaves out the
+    residual analysis of the final chart (the HTML report draws it with the final fit)."""
     settings = diagnosis.report["settings"]
     alignment, seed = settings["alignment"], settings["seed"]
     if settings.get("split") is not None:
@@ -70,7 +69,7 @@ def write_plots(diagnosis: Diagnosis, train: Dataset, directory: str | Path) -> 
     inputs = list(diagnosis.final.diagram.input_names)
     first = 1 if alignment == "zoh" else 0
     measured = {n: np.asarray(train.columns[n])[first:] for n in names}  # outputs on the fitted rows
-    written = []
+    out = []
     rng = np.random.default_rng(0)
     for a in diagnosis.report["accepted"]:
         at = a["at"]
@@ -81,31 +80,41 @@ def write_plots(diagnosis: Diagnosis, train: Dataset, directory: str | Path) -> 
         n = e0.shape[0]
         pick = np.sort(rng.choice(n, size=min(n, _MAX_POINTS), replace=False))
         fig, axes = _figure(len(names), 2)
-        for i, out in enumerate(names):
+        for i, out_name in enumerate(names):
             for j, (e, title) in enumerate(((e0, "chart as given"), (e1, "final chart"))):
                 ax = axes[i, j]
                 ax.plot(x[pick], e[pick, i], ".", ms=1.5, color="tab:blue" if j == 0 else "tab:green")
                 ax.axhline(0.0, color="0.3", lw=0.6)
                 ax.set_xlabel(at)
-                ax.set_ylabel(f"residual {out}")
+                ax.set_ylabel(f"residual {out_name}")
                 ax.set_title(f"{title}: {a['effect']} at {at}", fontsize=9)
-        written.append(_save(fig, directory / f"residual_{a['effect']}_{at}.png"))
+        out.append((f"residual_{a['effect']}_{at}.png", fig))
     w = diagnosis.report.get("whiteness", {})
     if "autocorrelation" in (w.get("before") or {}) and "autocorrelation" in (w.get("after") or {}):
         fig, axes = _figure(len(names), 1)
-        for i, out in enumerate(names):
+        for i, out_name in enumerate(names):
             ax = axes[i, 0]
             for key, color in (("before", "tab:blue"), ("after", "tab:green")):
-                s = w[key]["autocorrelation"][out]
+                s = w[key]["autocorrelation"][out_name]
                 ax.plot(s["lags"], s["r"], "o-", ms=3, color=color, label=key)
             band = w["after"]["bound"]
             ax.axhspan(-band, band, color="0.85", label=f"{100 * w['after']['level']:g} % band ±{band:.3g}")
             ax.set_xlabel("lag (samples)")
-            ax.set_ylabel(f"autocorrelation {out}")
+            ax.set_ylabel(f"autocorrelation {out_name}")
             ax.legend(fontsize=8, loc="upper right")
-        written.append(_save(fig, directory / "whiteness.png"))
-    if e1 is not None:  # MATLAB's resid figure of the final chart, one per output
+        out.append(("whiteness.png", fig))
+    if resid and e1 is not None:  # MATLAB's resid figure of the final chart, one per output
         u = np.column_stack([s1[n] for n in inputs])
-        written += write_resid(e1, u, names, inputs, directory, "final chart, training record",
-                               signal_units(diagnosis.final.diagram))
-    return written
+        units = signal_units(diagnosis.final.diagram)
+        for j, name in enumerate(names):
+            if np.all(np.isfinite(e1[:, j])) and e1.shape[0] >= 3:
+                fig = resid_figure(e1[:, j], u, name, inputs, "final chart, training record", units.get(name))
+                out.append((f"resid_{safe_name(name)}.png", fig))
+    return out
+
+
+def write_plots(diagnosis: Diagnosis, train: Dataset, directory: str | Path) -> list[Path]:
+    """Write the figures; returns the paths written. Needs matplotlib (checked by the CLI first)."""
+    directory = Path(directory)
+    directory.mkdir(parents=True, exist_ok=True)
+    return [_save(fig, directory / name) for name, fig in figures(diagnosis, train)]

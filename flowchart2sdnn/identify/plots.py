@@ -36,13 +36,13 @@ _INSTALL = "pip install flowchart2sdnn[plots]"
 _MAX_DEPTH = 32
 
 
-def require_matplotlib() -> None:
-    """Raise a one-line SdnnError (PLOT001) naming the install command when matplotlib is missing."""
+def require_matplotlib(option: str = "--plots") -> None:
+    """Raise a one-line SdnnError (PLOT001) naming `option` and the install command when matplotlib is missing."""
     try:
         import matplotlib  # noqa: F401
         from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: F401
     except ImportError:
-        raise SdnnError.at("PLOT001", f"--plots needs matplotlib, which is not installed: {_INSTALL}", "--plots",
+        raise SdnnError.at("PLOT001", f"{option} needs matplotlib, which is not installed: {_INSTALL}", option,
                            hint=_INSTALL) from None
 
 

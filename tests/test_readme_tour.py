@@ -1,0 +1,92 @@
+"""The README's five-minute tour runs as written: its commands are read from the README's code block, shortened
+by the substitutions below (each must apply, so a changed README fails here instead of drifting), and run one
+by one in a fresh directory that holds only the repository's diagrams/, examples/ and tests/data/.
+
+`sdnn` commands run in this process (click's runner: the numba kernels compile once), `python` commands as
+subprocesses; every command must exit 0 and write what it says it writes.
+"""
+
+from __future__ import annotations
+
+import os
+import re
+import shlex
+import subprocess
+import sys
+from pathlib import Path
+
+import pytest
+from click.testing import CliRunner
+from html_check import read_page
+
+from flowchart2sdnn.cli import main
+
+ROOT = Path(__file__).resolve().parents[1]
+README = (ROOT / "README.md").read_text(encoding="utf-8")
+
+#: (pattern, replacement, times it must match): shorter records, fewer starts, files and iterations
+SHORTEN = [
+    (r"--seconds 30 ", "--seconds 2 ", 1),
+    (r"--seconds 100 ", "--seconds 3 ", 1),
+    (r"--window 25000 --average 25000", "--window 1000 --average 1000", 1),
+    (r"--starts (4|16)", "--starts 2", 2),
+    (r"--horizon 100", "--horizon 20", 1),
+    (r"(python examples/make_fleet\.py logs)", r"\1 --drives 2 --days 2 --seconds 1", 1),
+    (r"^(sdnn (?:identify bench\S*|diagnose|batch) .*)$", r"\1 --max-iter 15", 5),
+]
+
+#: what the tour writes (the files its commands name)
+WRITTEN = ["two_mass.net.json", "two_mass.dot", "bench.csv", "stage1.json", "stage1.chart.yaml", "stage2.json",
+           "stage2.html", "diagnose.html",
+           "net.csv", "ode.csv", "compare.png", "two_mass.npz", "bode.png", "bench100.csv", "report.json",
+           "logs/drive01_day001.csv", "logs/drive02_day002.csv", "fleet.csv", "fleet_report/report.md"]
+
+
+def tour_commands() -> list[str]:
+    block = re.search(r"## A five-minute tour\n\n```bash\n(.*?)```", README, re.S)
+    assert block, "the README has no tour block"
+    text = block.group(1).replace("\\\n", " ")  # a command continued on the next line
+    for pattern, replacement, times in SHORTEN:
+        text, n = re.subn(pattern, replacement, text, flags=re.M)
+        assert n == times, f"{pattern!r} matched {n} times in the README's tour, expected {times}"
+    return [line for line in text.splitlines() if line.strip() and not line.lstrip().startswith("#")]
+
+
+def test_the_tour_block_has_every_step():
+    steps = re.findall(r"^# (\d)\. ", re.search(r"## A five-minute tour\n\n```bash\n(.*?)```", README,
+                                                  re.S).group(1), re.M)
+    assert steps == [str(k) for k in range(1, 9)]
+    assert any("make_fleet.py logs" in c for c in tour_commands())  # step 8 says how to make logs/
+
+
+def test_the_readme_tour_runs_as_written(tmp_path, monkeypatch):
+    pytest.importorskip("matplotlib")  # step 5 draws (the plots extra, which the test extra installs)
+    for name in ("diagrams", "examples"):
+        (tmp_path / name).symlink_to(ROOT / name)
+    (tmp_path / "tests").mkdir()
+    (tmp_path / "tests" / "data").symlink_to(ROOT / "tests" / "data")
+    monkeypatch.chdir(tmp_path)
+    env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
+    for command in tour_commands():
+        argv = shlex.split(command, comments=True)
+        if argv[0] == "python":
+            done = subprocess.run([sys.executable, *argv[1:]], cwd=tmp_path, env=env, capture_output=True,
+                                  text=True, timeout=120)
+            assert done.returncode == 0, f"{command}\n{done.stderr}"
+            continue
+        assert argv[0] == "sdnn", command
+        res = CliRunner().invoke(main, argv[1:])
+        assert res.exit_code == 0, f"{command}\n{res.output}"
+    missing = [f for f in WRITTEN if not (tmp_path / f).is_file()]
+    assert missing == []
+    # the HTML reports: self-contained, every figure there, small enough to attach
+    figures, text = read_page(tmp_path / "stage2.html")
+    assert figures == ["compare", "resid w2 training", "resid w2 validation: bench.csv after the split", "Bode plot"]
+    assert "two_mass: identification" in text and "N*m/rad" in text and "95 % interval" in text
+    figures, text = read_page(tmp_path / "diagnose.html")
+    accepted = re.search(r"accepted: ([^.]*?) stopped", text).group(1)
+    assert {"compare", "whiteness", "Bode plot"} <= set(figures), figures
+    assert sum(f.startswith("residual_") for f in figures) == accepted.count(" at "), (accepted, figures)
+    assert "Candidates, ranked" in text and "Before and after" in text
+    for page in ("stage2.html", "diagnose.html"):
+        assert (tmp_path / page).stat().st_size < 2_000_000
