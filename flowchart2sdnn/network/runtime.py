@@ -303,9 +303,18 @@ class CompiledNetwork:
         """
         return u if self.net.substeps == 1 else np.repeat(u, self.net.substeps, axis=0)
 
-    def _run(self, theta, inputs, init, record: np.ndarray) -> np.ndarray:
+    def _history(self, init, history) -> np.ndarray:
+        if history is None:
+            return self.initial_history(init)
+        hist = np.array(history, dtype=float)
+        if hist.shape != (self._flat.n_neurons,) or not np.all(np.isfinite(hist)):
+            raise ValueError(f"history must be {self._flat.n_neurons} finite values (one per neuron), "
+                             f"got shape {hist.shape}")
+        return hist
+
+    def _run(self, theta, inputs, init, record: np.ndarray, history=None) -> np.ndarray:
         u = self._steps(self._check_inputs(inputs))
-        hist = self.initial_history(init)
+        hist = self._history(init, history)
         conn_val, _ = self._connection_values(theta, with_derivatives=False)
         f = self._flat
         return simulate_kernel(
@@ -313,7 +322,8 @@ class CompiledNetwork:
             self.net.substeps,
         )
 
-    def simulate(self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None) -> np.ndarray:
+    def simulate(self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None,
+                 history: np.ndarray | None = None) -> np.ndarray:
         """Network outputs for `inputs`.
 
         Parameters
@@ -322,12 +332,15 @@ class CompiledNetwork:
         inputs : (Q, n_inputs) array_like
         init : mapping, optional
             Output name -> value, for states initialised from data.
+        history : (n_neurons,) array_like, optional
+            Every neuron's output before the first step (replaces the file's initial states and `init`):
+            an initial state estimated from data (identify.initstate).
 
         Returns
         -------
         (Q, n_outputs) ndarray, possibly non-finite when theta makes the network unstable.
         """
-        return self._run(theta, inputs, init, self._flat.output_index)
+        return self._run(theta, inputs, init, self._flat.output_index, history)
 
     def jacobian(
         self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None
