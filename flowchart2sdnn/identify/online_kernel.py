@@ -100,12 +100,12 @@ from .online_window import (  # noqa: F401 - re-exported: the run's state layout
     I_STEPS,
     N_FS,
     N_ITS,
-    _external,
     _lm_step,
     _push_row,
     _set,
     _window_iteration,
     cholesky_solve,
+    external,
     mu_accepted,
     mu_refused,
     resync,
@@ -128,6 +128,7 @@ __all__ = [
     "scaled_mu",
     "window_sim",
     "window_rtrl",
+    "external",
     "LINEARITY_TOL",
 ]
 

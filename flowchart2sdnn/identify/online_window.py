@@ -34,7 +34,7 @@ _first_mu = numba.njit(cache=True)(damping.first_mu)
 
 # ------------------------------------------------------------------------------------------ small numerics
 @numba.njit(cache=True, inline="always")
-def _external(u, kind, lo, hi, x, dxdu):
+def external(u, kind, lo, hi, x, dxdu):
     """x(u) and dx/du, the formulas of fit/transforms.py (result clipped into [lo, hi] for two bounds)."""
     for i in range(u.shape[0]):
         k = kind[i]
@@ -97,7 +97,7 @@ def cholesky_solve(M, rhs, L, out):
 @numba.njit(cache=True)
 def _set(u, x, dxdu, conn_val, dval, bnd, wp, stack):
     """x, dx/du and the weights at u; False when a weight is not finite."""
-    _external(u, bnd[0], bnd[1], bnd[2], x, dxdu)
+    external(u, bnd[0], bnd[1], bnd[2], x, dxdu)
     return eval_weights(x, wp, conn_val, dval, stack)
 
 

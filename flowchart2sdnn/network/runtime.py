@@ -238,7 +238,9 @@ class CompiledNetwork:
             weights[name] = float(theta[i])
         return params, weights
 
-    def _connection_values(self, theta, with_derivatives: bool):
+    def connection_values(self, theta, with_derivatives: bool = False):
+        """Every connection's value at `theta` (the flat network's order), and with `with_derivatives` the
+        values of its sparse d(value)/d(theta) entries (the kernels' ``dval``); else None."""
         params, weights = self.values(theta)
         coef = np.array([_evaluate(expr, params) for expr in self._exprs])
         wv = coef[self._weight_expr]
@@ -315,7 +317,7 @@ class CompiledNetwork:
     def _run(self, theta, inputs, init, record: np.ndarray, history=None) -> np.ndarray:
         u = self._steps(self._check_inputs(inputs))
         hist = self._history(init, history)
-        conn_val, _ = self._connection_values(theta, with_derivatives=False)
+        conn_val, _ = self.connection_values(theta, with_derivatives=False)
         f = self._flat
         return simulate_kernel(
             u, f.conn_ptr, f.conn_kind, f.conn_src, f.conn_delay, conn_val, f.transfer, hist, f.ring, record,
@@ -355,7 +357,7 @@ class CompiledNetwork:
         """
         u = self._steps(self._check_inputs(inputs))
         hist = self.initial_history(init)
-        conn_val, dval = self._connection_values(theta, with_derivatives=True)
+        conn_val, dval = self.connection_values(theta, with_derivatives=True)
         f = self._flat
         return jacobian_kernel(
             u,
