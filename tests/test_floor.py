@@ -142,3 +142,13 @@ def test_diagnose_credits_no_effect_with_the_floor():
     first = int(round(0.7 * ds.n_rows))
     diff = np.column_stack([net[n][first:] - cont[first:, i] for i, n in enumerate(ident.chart.output_names)])
     assert report["before"]["validation_floor"] == pytest.approx(float(np.sqrt(np.mean(diff**2))), rel=0.02)
+
+
+def test_floor_never_writes_a_non_finite_number(monkeypatch):
+    """A run whose values are finite but whose squares overflow (the chart fuzzer's gain -23183) skips the floor."""
+    from flowchart2sdnn.identify import floor as F
+
+    monkeypatch.setattr(F, "_one", lambda *a, **k: np.array([[1e200, 0.0]]))
+    out = F.measure_floor(None, type("C", (), {"net": type("N", (), {"substeps": 1})(),
+                                               "output_names": ("w1", "w2")})(), None, [(None, 0)], "zoh")
+    assert out["rms"] is None and "too large" in out["skipped"]

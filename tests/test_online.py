@@ -239,7 +239,7 @@ def test_weight_program_matches_the_runtime():
         theta = cn.theta0() * rng.uniform(0.5, 1.5, cn.n_theta)
         conn, dval = np.zeros(prog.n_connections), np.zeros(prog.n_slots)
         assert ok.eval_weights(theta, prog.exprs, conn, dval, np.empty(prog.stack))
-        ref_conn, ref_dval = cn._connection_values(theta, with_derivatives=True)
+        ref_conn, ref_dval = cn.connection_values(theta, with_derivatives=True)
         np.testing.assert_allclose(conn, ref_conn, rtol=1e-15, atol=0)
         np.testing.assert_allclose(dval, ref_dval, rtol=1e-15, atol=0)
     theta = cn.theta0()
@@ -253,7 +253,7 @@ def test_transform_and_cholesky_kernels():
     kind = np.array([0, 1, 2, 3], dtype=np.int64)
     u = np.array([0.7, -1.3, 2.2, 0.4])
     x, dxdu = np.empty(4), np.empty(4)
-    ok._external(u, kind, np.array(bounds.lower), np.array(bounds.upper), x, dxdu)
+    ok.external(u, kind, np.array(bounds.lower), np.array(bounds.upper), x, dxdu)
     np.testing.assert_allclose(x, bounds.to_external(u), rtol=1e-15)
     np.testing.assert_allclose(dxdu, bounds.dx_du(u), rtol=1e-15)
 

@@ -104,7 +104,7 @@ def test_rows_are_a_free_run_at_the_accepted_parameters_from_the_stored_state():
     conn, dval = np.zeros(run.program.n_connections), np.zeros(run.program.n_slots)
     assert ok.eval_weights(other, run.program.exprs, conn, dval, np.empty(run.program.stack))
     e_tr, tr_state, a_tr = np.zeros((q, 1)), np.zeros_like(st.win_state), np.zeros_like(st.a_buf)
-    cost = ok.window_sim(run.inputs, run.targets, run._net, conn, st.win_state, st.win_time, st.its, a_tr,
+    cost = ok.window_sim(run.inputs, run.targets, run.net, conn, st.win_state, st.win_time, st.its, a_tr,
                          np.empty(ring, dtype=np.int64), e_tr, tr_state)
     e_hand = target[n - q:] - hand_run(*other, u[n - q:], y_prev)[0]
     np.testing.assert_allclose(e_tr[rows, 0], e_hand, rtol=1e-10, atol=1e-12)

@@ -38,7 +38,7 @@ def test_the_weight_table_is_frozen_and_says_how_the_connections_are_made():
     dconn = np.zeros(table.n_slots)
     for i, f in enumerate(table.term_free):
         dconn[table.term_slot[i]] += float(table.term_expr[i].evaluate(params)) * (free[f] if f is not None else 1.0)
-    ref_conn, ref_dval = cn._connection_values(theta, with_derivatives=True)
+    ref_conn, ref_dval = cn.connection_values(theta, with_derivatives=True)
     np.testing.assert_allclose(conn, ref_conn, rtol=1e-14)
     np.testing.assert_allclose(dconn, ref_dval, rtol=1e-14)
     assert table.conn_slots[-1] == table.n_slots and np.all(np.diff(table.conn_slots) >= 0)

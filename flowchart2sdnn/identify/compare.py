@@ -79,17 +79,6 @@ def signal_units(diagram: Diagram | None) -> dict[str, str | None]:
     return {s.name: s.unit or blocks.get(s.name) for s in (*diagram.inputs, *diagram.outputs)}
 
 
-def _connection_values(compiled: CompiledNetwork, theta: np.ndarray) -> np.ndarray:
-    """The connection values at theta, from the runtime's public weight table."""
-    params, free = compiled.values(theta)
-    table = compiled.weights
-    with np.errstate(all="ignore"):
-        coef = np.array([float(e.evaluate(params)) for e in table.coefs])
-        scale = np.array([free[f] if f is not None else 1.0 for f in table.weight_free])
-        values = coef[table.weight_coef] * scale if len(scale) else np.zeros(0)
-    return compiled.flat.connection_values(values)
-
-
 def predict(compiled: CompiledNetwork, theta: np.ndarray, data: Dataset, alignment: str = "zoh",
             horizon: int | None = None) -> np.ndarray:
     """Model outputs for every row of `data` (Q, n_outputs): the free run, or the `horizon`-step-ahead
@@ -107,7 +96,8 @@ def predict(compiled: CompiledNetwork, theta: np.ndarray, data: Dataset, alignme
             return run_aligned(compiled, theta, u, alignment, init)
     y = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in compiled.output_names])
     flat = compiled.flat
-    conn = _connection_values(compiled, theta)
+    with np.errstate(all="ignore"):
+        conn, _ = compiled.connection_values(theta)
     every = np.arange(flat.n_neurons, dtype=np.int64)
     first = fitted_rows(data.n_rows, alignment).start  # network step t produces row t + first
     out = np.empty((len(p), compiled.n_outputs))

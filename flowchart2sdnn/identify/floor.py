@@ -77,7 +77,10 @@ def measure_floor(chart: Diagram, compiled, x, records: Sequence[tuple[Dataset, 
         return {"rms": None, "skipped": "the network diverges on these records"}
     if not len(e):
         return {"rms": None, "skipped": "no scored rows"}
-    rms = np.sqrt(np.mean(e**2, axis=0))
+    with np.errstate(over="ignore", invalid="ignore"):
+        rms = np.sqrt(np.mean(e**2, axis=0))
+    if not np.all(np.isfinite(rms)):  # RESULT.json is strict JSON: no inf from a square that overflows
+        return {"rms": None, "skipped": "the difference is too large to square (a run near overflow)"}
     return {"rms": {n: float(v) for n, v in zip(compiled.output_names, rms, strict=True)}, "rows": int(len(e)),
             "records": len(records),
             "oracle": f"simulate_continuous of the identified chart, RK4 with {steps} steps per sample"}

@@ -238,7 +238,8 @@ class OnlineRun:
 
     Validates the arguments (see :func:`quasi_online`) and allocates the state; :meth:`advance` runs the
     kernel, :meth:`result` packs an :class:`OnlineResult`. Exposed for tests and tools that inspect the
-    window (:attr:`state`) or the current trial (:meth:`trial_theta`).
+    window (:attr:`state`) or the current trial (:meth:`trial_theta`); :attr:`net` holds the flat network's
+    arrays in the order the kernel takes them.
     """
 
     def __init__(self, compiled: CompiledNetwork, inputs, targets, theta0=None, lower=None, upper=None,
@@ -262,7 +263,7 @@ class OnlineRun:
         self.state = ok.new_state(self.bounds.start(x0), prog.n_connections, prog.n_slots,
                                   compiled.initial_history(init), flat.ring, opt.window, compiled.n_outputs,
                                   opt.average, opt.mu0, replay=opt.tries > 0)
-        self._net = (flat.conn_ptr, flat.conn_kind, flat.conn_src, flat.conn_delay, flat.transfer,
+        self.net = (flat.conn_ptr, flat.conn_kind, flat.conn_src, flat.conn_delay, flat.transfer,
                      compiled.weights.conn_slots, compiled.weights.slot_theta, flat.output_index)
         self._bnd = (_bound_codes(self.bounds), np.array(self.bounds.lower, dtype=float),
                      np.array(self.bounds.upper, dtype=float))
@@ -286,7 +287,7 @@ class OnlineRun:
         if self.diverged_at_start:
             return False
         st = self.state
-        code = ok.online_chunk(self.done, min(int(end), self.n_samples), self.inputs, self.targets, self._net,
+        code = ok.online_chunk(self.done, min(int(end), self.n_samples), self.inputs, self.targets, self.net,
                                self.program.exprs, self._bnd, self._fopt, self._iopt, st.model(), st.trial(),
                                st.window(), st.replay(), (st.avg_x, st.avg_cost), st.fs, st.its, st.div_t, self._rec_x,
                                self._rec_cost, self._rec_mu)

@@ -77,6 +77,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from ..network.rowops import padded
 from ..network.weight_program import WeightProgram, eval_weights, weight_program  # noqa: F401 - re-exported
 from .online_window import (  # noqa: F401 - re-exported: the run's state layout and window numerics
     F_CC,
@@ -99,12 +100,12 @@ from .online_window import (  # noqa: F401 - re-exported: the run's state layout
     I_STEPS,
     N_FS,
     N_ITS,
-    _external,
     _lm_step,
     _push_row,
     _set,
     _window_iteration,
     cholesky_solve,
+    external,
     mu_accepted,
     mu_refused,
     resync,
@@ -127,6 +128,7 @@ __all__ = [
     "scaled_mu",
     "window_sim",
     "window_rtrl",
+    "external",
     "LINEARITY_TOL",
 ]
 
@@ -142,7 +144,7 @@ STATUS_OK, STATUS_DIVERGED_BEFORE_START = 0, 1
 class OnlineState:
     """Every array the kernel reads and mutates; sizes depend on Q, K, P and the network, never on the record.
 
-    model:  u, x, dxdu (P,); conn_val (C,); dval (D,); a_buf (ring, N); s_buf, s_blk (ring, N, P)
+    model:  u, x, dxdu (P,); conn_val (C,); dval (D,); a_buf (ring, N); s_buf, s_blk (ring, N, padded(P))
     trial:  u_tr, x_tr, dxdu_tr (P,); conn_tr (C,); dval_tr (D,); a_tr (ring, N)
     window: win_J (Q, n_out, P); win_c, win_e (Q, n_out); A (P, P) lower triangle; b, u_ref (P,)
     average over the last K LM steps: avg_x (K, P); avg_cost (K,)
@@ -211,9 +213,10 @@ def new_state(u0: np.ndarray, n_connections: int, n_slots: int, history: np.ndar
     fs = np.zeros(N_FS)
     fs[F_MU] = mu0
     rows = window if replay else 1
+    rows_s = (ring, n, padded(p))  # sensitivity rows padded for the RTRL step's vector operations
     return OnlineState(
         u=np.array(u0, dtype=float), x=np.zeros(p), dxdu=np.zeros(p), conn_val=np.zeros(n_connections),
-        dval=np.zeros(n_slots), a_buf=a_buf, s_buf=np.zeros((ring, n, p)), s_blk=np.zeros((ring, n, p)),
+        dval=np.zeros(n_slots), a_buf=a_buf, s_buf=np.zeros(rows_s), s_blk=np.zeros(rows_s),
         u_tr=np.array(u0, dtype=float), x_tr=np.zeros(p), dxdu_tr=np.zeros(p), conn_tr=np.zeros(n_connections),
         dval_tr=np.zeros(n_slots), a_tr=a_buf.copy(), history=np.array(history, dtype=float),
         win_J=np.zeros((window, n_outputs, p)), win_c=np.zeros((window, n_outputs)),
@@ -300,8 +303,8 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
     window = win_J.shape[0]
     stack = np.empty(iopt[4])
     slot_of = np.empty(ring, dtype=np.int64)
-    dn = np.empty(n_theta)
-    dn2 = np.empty(n_theta)
+    dn = np.empty(s_buf.shape[2])
+    dn2 = np.empty(s_buf.shape[2])
     e = np.empty(n_out)
     J = np.empty((n_out, n_theta))
     M = np.empty((n_theta, n_theta))

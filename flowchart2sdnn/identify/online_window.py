@@ -19,7 +19,7 @@ import numba
 import numpy as np
 
 from ..fit import damping
-from ..network.kernels import rtrl_step, simulate_step
+from ..network.kernels import ix, rtrl_step, simulate_step
 from ..network.weight_program import eval_weights
 
 F_MU, F_EE, F_CC, F_CH, F_NL = range(5)
@@ -34,7 +34,7 @@ _first_mu = numba.njit(cache=True)(damping.first_mu)
 
 # ------------------------------------------------------------------------------------------ small numerics
 @numba.njit(cache=True, inline="always")
-def _external(u, kind, lo, hi, x, dxdu):
+def external(u, kind, lo, hi, x, dxdu):
     """x(u) and dx/du, the formulas of fit/transforms.py (result clipped into [lo, hi] for two bounds)."""
     for i in range(u.shape[0]):
         k = kind[i]
@@ -97,14 +97,15 @@ def cholesky_solve(M, rhs, L, out):
 @numba.njit(cache=True)
 def _set(u, x, dxdu, conn_val, dval, bnd, wp, stack):
     """x, dx/du and the weights at u; False when a weight is not finite."""
-    _external(u, bnd[0], bnd[1], bnd[2], x, dxdu)
+    external(u, bnd[0], bnd[1], bnd[2], x, dxdu)
     return eval_weights(x, wp, conn_val, dval, stack)
 
 
 # ------------------------------------------------------------------------------------------ network steps
 # `net` = (conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, output_index); the steps are
-# inlined here, so the run keeps strict IEEE order (no fastmath) as before the steps were shared
-@numba.njit(cache=True)
+# inlined here, so the run keeps strict IEEE order (no fastmath) as before the steps were shared; these
+# wrappers are inlined in turn into the per-sample and per-row loops (a call per sample passed ~100 arguments)
+@numba.njit(cache=True, inline="always")
 def rtrl(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2):
     """:func:`~flowchart2sdnn.network.kernels.rtrl_step` on the run's arrays."""
     conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, _ = net
@@ -112,7 +113,7 @@ def rtrl(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, with_blk, slot_of,
               a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2)
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, inline="always")
 def simulate(t, inputs, net, conn_val, a_buf, slot_of):
     """:func:`~flowchart2sdnn.network.kernels.simulate_step` on the run's arrays."""
     conn_ptr, conn_kind, conn_src, conn_delay, transfer, _, _, _ = net
@@ -129,21 +130,23 @@ def resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its):
     cc = 0.0
     ee = 0.0
     count = its[I_COUNT]
-    for i in range(count):
-        q = (its[I_HEAD] - count + i + window) % window
+    q = (its[I_HEAD] - count + window) % window
+    for _ in range(count):
         for o in range(n_out):
-            jq = win_J[q, o]
+            jq = win_J[ix(q), ix(o)]
             shift = 0.0
             for p in range(n_theta):
-                shift += jq[p] * (u[p] - u_ref[p])
-            c = win_c[q, o] - shift
-            win_c[q, o] = c
+                shift += jq[ix(p)] * (u[ix(p)] - u_ref[ix(p)])
+            c = win_c[ix(q), ix(o)] - shift
+            win_c[ix(q), ix(o)] = c
             cc += c * c
-            ee += win_e[q, o] * win_e[q, o]
+            ee += win_e[ix(q), ix(o)] * win_e[ix(q), ix(o)]
             for p in range(n_theta):
+                jp = jq[ix(p)]
                 for r in range(p + 1):
-                    A[p, r] += jq[p] * jq[r]
-                b[p] += jq[p] * c
+                    A[ix(p), ix(r)] += jp * jq[ix(r)]
+                b[ix(p)] += jp * c
+        q = q + 1 if q + 1 < window else 0
     u_ref[:] = u
     fs[F_CC] = cc
     fs[F_EE] = ee
@@ -245,33 +248,40 @@ def _replay(inputs, targets, net, conn, dval, dxdu, a, s, s_blk, with_sens, win_
     count = its[I_COUNT]
     head = its[I_HEAD]
     ring = a.shape[0]
+    n_state = a.size
+    states_flat = states.reshape(states.size)  # copied as one flat loop: the 2-D copy cost 0.1 us per row
+    a_flat = a.reshape(n_state)
     cost = 0.0
-    prev = -2
-    for i in range(count):
-        q = (head - count + i + window) % window
-        tq = win_time[q]
-        if tq != prev + 1:
-            a[:, :] = win_state[q]
-            if with_sens:
-                s[:, :, :] = 0.0
-        states[q] = a
+    q = (head - count + window) % window
+    i = 0
+    while i < count:  # a run of consecutive samples, from its stored state (as its own loop: a restore
+        a[:, :] = win_state[q]  # branch inside the per-row loop made that loop twice as slow)
         if with_sens:
-            rtrl(tq, inputs, net, conn, dval, a, s, s_blk, False, slot_of, dn, dn2)
-        else:
-            simulate(tq, inputs, net, conn, a, slot_of)
-        slot = tq % ring
-        for o in range(output_index.shape[0]):
-            r = output_index[o]
-            err = targets[tq, o] - a[slot, r]
-            e_out[q, o] = err
-            cost += err * err
+            s[:, :, :] = 0.0
+        prev = win_time[ix(q)] - 1
+        while i < count and win_time[ix(q)] == prev + 1:
+            tq = win_time[ix(q)]
+            for j in range(n_state):
+                states_flat[ix(q * n_state + j)] = a_flat[ix(j)]
             if with_sens:
-                c_out[q, o] = err
-                for p in range(dxdu.shape[0]):
-                    J_out[q, o, p] = s[slot, r, p] * dxdu[p]
-        if not with_sens and (not 0.5 * cost <= limit or cost > 1e300):
-            return math.inf
-        prev = tq
+                rtrl(tq, inputs, net, conn, dval, a, s, s_blk, False, slot_of, dn, dn2)
+            else:
+                simulate(tq, inputs, net, conn, a, slot_of)
+            slot = ix(tq % ring)
+            for o in range(output_index.shape[0]):
+                r = ix(output_index[ix(o)])
+                err = targets[ix(tq), ix(o)] - a[slot, r]
+                e_out[ix(q), ix(o)] = err
+                cost += err * err
+                if with_sens:
+                    c_out[ix(q), ix(o)] = err
+                    for p in range(dxdu.shape[0]):
+                        J_out[ix(q), ix(o), ix(p)] = s[slot, r, ix(p)] * dxdu[ix(p)]
+            if not with_sens and (not 0.5 * cost <= limit or cost > 1e300):
+                return math.inf
+            prev = tq
+            q = q + 1 if q + 1 < window else 0
+            i += 1
     return 0.5 * cost
 
 

@@ -208,13 +208,16 @@ def network_input_names(network: Network) -> list[str]:
 
 
 def metrics(compiled: CompiledNetwork, x: np.ndarray, data: Dataset, alignment: str, init=None,
-            score_from: int = 0) -> dict:
-    """Free-run fit metrics on a record: cost E (eq. 4), RMS and fit % per output, on rows >= score_from."""
+            score_from: int = 0, history: np.ndarray | None = None) -> dict:
+    """Free-run fit metrics on a record: cost E (eq. 4), RMS and fit % per output, on rows >= score_from.
+
+    `history` (every neuron's value before the first step, see identify.initstate) replaces the initial state.
+    """
     network = compiled.net
     u = _stack(data, network_input_names(network))
     y = _stack(data, compiled.output_names)
     init = data_init(network, data) if init is None else init
-    yhat = run_aligned(compiled, x, u, alignment, init)
+    yhat = run_aligned(compiled, x, u, alignment, init, history=history)
     start = max(score_from, fitted_rows(data.n_rows, alignment).start)
     with np.errstate(over="ignore", invalid="ignore", divide="ignore"):
         e = y[start:] - yhat[start:]

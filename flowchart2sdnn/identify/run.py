@@ -32,7 +32,8 @@ from ..fit.lm import CONVERGED_STATUSES, LMOptions, LMResult
 from ..fit.multistart import draw_starts, run_multistart
 from .evidence import assess, no_excitation_message, on_bound_warnings, sqrt_domain_warnings, start_stability
 from .floor import floor_warnings, measure_floor
-from .problem import Problem, build_problem, combined_metrics, metrics
+from .initstate import estimate_initial_state
+from .problem import Problem, build_problem, combined_metrics, data_init, metrics
 from .result import (
     ChartSource,
     Curve,
@@ -49,7 +50,7 @@ from .result import (
 from .settings import MIN_REL_COST_CHANGE, IdentifySettings
 from .workers import fit_start, fit_task, quasi_online_start, run_quasi_online_start, run_start
 
-__all__ = ["IdentifySettings", "Identification", "identify"]
+__all__ = ["IdentifySettings", "Identification", "identify", "lm_options"]
 
 _ONLINE_COST = "mean window cost over the last K steps of each quasi-online run"
 
@@ -150,7 +151,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         parameters[p.name] = Estimate(float(params[p.name]), float(p.init), stderr, ci, p.unit, i is None)
 
     chart = _resolved(with_values(diagram, params, curves), problem.network)
-    fit = _fit(problem, x, settings, train, more, full, validation)
+    fit, state = _fit(problem, x, settings, train, more, full, validation)
     disc = discretization(diagram, problem.network)
     if status == "diverged_at_start":
         disc["floor"] = {"rms": None, "skipped": "the fit diverged at its start"}
@@ -171,7 +172,8 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         multistart=out.multistart, uncertainty=evidence.uncertainty,
         online=_online_trace(out.online, problem.names, settings) if out.online is not None else None,
         problem=problem, x=x, lm=out.lm, online_run=out.online,
-        extra={"discretization": disc},
+        extra={"discretization": disc,
+               **({"initial_states": {"validation": state.to_dict()}} if state is not None else {})},
     )
 
 
@@ -188,9 +190,21 @@ def _resolved(chart, network):
     return replace(chart, substeps=network.substeps) if chart.substeps == "auto" else chart
 
 
+def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
+    """The LM options of an offline fit with these settings (benchmarks run LM exactly as identify does).
+
+    With column scaling each physical parameter is damped by its own curvature and the learned curves' weights
+    share one scale (see fit.lm.LMOptions.scale_groups).
+    """
+    params = {p.name for p in problem.network.parameters}
+    groups = tuple(i if n in params else -1 for i, n in enumerate(problem.names))
+    return LMOptions(max_iter=settings.max_iter, min_rel_cost_change=MIN_REL_COST_CHANGE, tau=settings.lm_tau,
+                     stall_decrease=settings.converged_decrease / max(1, problem.n_residuals),
+                     scale=settings.lm_scale, scale_groups=groups if settings.lm_scale == "jac" else ())
+
+
 def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, progress, stop, executor) -> _Outcome:
-    options = LMOptions(max_iter=settings.max_iter, min_rel_cost_change=MIN_REL_COST_CHANGE, tau=settings.lm_tau,
-                        stall_decrease=settings.converged_decrease / max(1, problem.n_residuals))
+    options = lm_options(settings, problem)
     starts = draw_starts(problem.names, x0, lower, upper, settings.starts, settings.seed,
                          ranges=settings.ranges or None)
     if executor is None:  # in this process: progress and Ctrl-C after every LM iteration
@@ -273,7 +287,8 @@ def _summary(ms, names, cost: str | None = None) -> MultistartSummary:
 
 
 def _fit(problem: Problem, x, settings: IdentifySettings, train: Dataset, more: list[Dataset], full: Dataset,
-         validation: Dataset | None) -> Fit:
+         validation: Dataset | None):
+    """(Fit, the validation record's fitted initial state or None)."""
     train_m = metrics(problem.compiled, x, train, settings.alignment)
     if more:
         per_record = [train_m] + [metrics(problem.compiled, x, d, settings.alignment) for d in more]
@@ -282,9 +297,17 @@ def _fit(problem: Problem, x, settings: IdentifySettings, train: Dataset, more: 
     if settings.split is not None:
         val = metrics(problem.compiled, x, full, settings.alignment, score_from=train.n_rows)
         val["note"] = "free run over the whole record, scored after the split"
+    elif validation is not None and settings.init_window:
+        state = estimate_initial_state(problem.compiled, x, validation, settings.alignment, settings.init_window,
+                                       data_init(problem.network, validation))
+        val = metrics(problem.compiled, x, validation, settings.alignment, score_from=settings.init_window,
+                      history=state.history)
+        val["note"] = (f"free run from the initial state fitted on the first {settings.init_window} samples, "
+                       f"scored from row {settings.init_window}")
+        return Fit(_metrics(train_m), _metrics(val)), state
     elif validation is not None:
         val = metrics(problem.compiled, x, validation, settings.alignment)
-    return Fit(_metrics(train_m), None if val is None else _metrics(val))
+    return Fit(_metrics(train_m), None if val is None else _metrics(val)), None
 
 
 def _metrics(d: dict) -> Metrics:

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = ["IdentifySettings", "IDENTIFY_TAU", "REFIT_TAU", "ONLINE_TAU", "MIN_REL_COST_CHANGE",
-           "CONVERGED_DECREASE"]
+           "CONVERGED_DECREASE", "IDENTIFY_SCALE"]
 
 #: First LM damping mu = tau * max diag(JᵀJ) (Madsen-Nielsen-Tingleff) for a fit from a chart's rough `init`:
 #: with trainlm's fixed 1e-3 a single start from the paper's Table 1 reached J1 in 2 of 5 seeds, with this 5/5.
@@ -25,6 +25,11 @@ REFIT_TAU = 0.0
 #: window mode met the paper experiment's acceptance from three of its four starts (docs/paper_experiment.md).
 #: trainlm's own first damping (mu0 = 1e-3) lives with the schedule, in fit/damping.py.
 ONLINE_TAU = 1.0
+#: LM damps each quantity by its own curvature, (JᵀJ + mu D²) with D the Jacobian's column norms (fit.lm,
+#: MINPACK's and scipy's x_scale='jac'), instead of trainlm's mu I: with mu I a stiffness of ~500 N·m/rad and an
+#: inertia of ~0.4 kg·m² share one damping and rough starts crawl (benchmarks/bench_rough_init.py, 10 s bench:
+#: 167-668 iterations and 2 of 3 rough starts at the minimum with mu I, 22-27 iterations and 3 of 3 with D²).
+IDENTIFY_SCALE = "jac"
 #: An LM iteration that gains less than this fraction of the cost ends the fit: further ones only polish noise.
 MIN_REL_COST_CHANGE = 1e-10
 #: A fit has converged when its last 10 iterations together lowered the cost E by less than this many times
@@ -55,8 +60,12 @@ class IdentifySettings:
     fixed_from : tuple of str  names fixed from an earlier result (reported only)
     ranges : {name: (lo, hi)}  where to draw starts, per parameter (default: the bounds)
     lm_tau : float           first LM damping factor (see :data:`IDENTIFY_TAU`); 0 gives trainlm's fixed 1e-3
+    lm_scale : str           "jac": damping scaled per quantity by the Jacobian's column norms (see
+                             :data:`IDENTIFY_SCALE`); "none": trainlm's mu I
     converged_decrease : float  converged when 10 iterations together gain less than this many times E/N
                              (see :data:`CONVERGED_DECREASE`); 0 runs to ``max_iter``
+    init_window : int        > 0: the validation record's initial state is fitted on its first init_window
+                             samples (parameters fixed), the free run scored from that row on (identify.initstate)
     """
 
     starts: int = 1
@@ -72,7 +81,9 @@ class IdentifySettings:
     fixed_from: tuple[str, ...] = ()
     ranges: dict = field(default_factory=dict)
     lm_tau: float = IDENTIFY_TAU
+    lm_scale: str = IDENTIFY_SCALE
     converged_decrease: float = CONVERGED_DECREASE
+    init_window: int = 0
 
     def __post_init__(self):
         _need(self.starts >= 1, f"starts must be at least 1, got {self.starts}")
@@ -84,4 +95,10 @@ class IdentifySettings:
         _need(self.online_start >= 0, f"online_start must not be negative, got {self.online_start}")
         _need(0 <= self.converged_decrease < 1e6 and math.isfinite(self.converged_decrease),
               f"converged_decrease must be a finite number >= 0, got {self.converged_decrease}")
+        _need(isinstance(self.init_window, int) and self.init_window >= 0,
+              f"init_window must be a whole number >= 0, got {self.init_window!r}")
+        _need(not (self.init_window and self.split is not None),
+              "init_window applies to a separate validation record, not to split (the validation part of a split "
+              "continues the training run's state)")
+        _need(self.lm_scale in ("jac", "none"), f"lm_scale must be 'jac' or 'none', got {self.lm_scale!r}")
         _need(self.lm_tau >= 0 and math.isfinite(self.lm_tau), f"lm_tau must be a finite number >= 0, got {self.lm_tau}")

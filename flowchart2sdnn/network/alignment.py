@@ -48,12 +48,18 @@ def history_outputs(net: Network, init: Mapping[str, float] | None = None) -> np
     return out
 
 
-def run_aligned(compiled, theta, u: np.ndarray, alignment: str = "zoh", init=None) -> np.ndarray:
-    """Model outputs for every row of the record (Q, n_outputs); with zoh, row 0 is the initial state."""
+def run_aligned(compiled, theta, u: np.ndarray, alignment: str = "zoh", init=None, history=None) -> np.ndarray:
+    """Model outputs for every row of the record (Q, n_outputs); with zoh, row 0 is the initial state.
+
+    `history` (every neuron's value before the first step, see CompiledNetwork.simulate) replaces the network's
+    initial states and `init`.
+    """
     p = network_inputs(u, alignment)
+    first = (history_outputs(compiled.net, init) if history is None
+             else np.asarray(history, dtype=float)[compiled.flat.output_index])
     if len(p) == 0:
-        return history_outputs(compiled.net, init)[None, :]
-    y = compiled.simulate(theta, p, init)
+        return first[None, :]
+    y = compiled.simulate(theta, p, init, history=history)
     if alignment == "zoh":
-        y = np.vstack([history_outputs(compiled.net, init)[None, :], y])
+        y = np.vstack([first[None, :], y])
     return y

@@ -20,6 +20,13 @@ that may be zero.
 The history does not depend on theta, so its sensitivities are zero. S is kept in a ring buffer too, so memory
 does not grow with Q except for the (Q, n_out, P) result. The kernels never raise on non-finite values: they
 propagate, and the caller checks ``np.isfinite``.
+
+Speed (the offline trainer calls these kernels a few times per iteration at Q of 10^4 to 10^5; the networks are
+small, so the cost is per-connection overhead, not flops): the rows of S are padded to a multiple of four
+lanes and updated as vectors (:mod:`.rowops`); indices are cast to unsigned (:func:`ix`) so that numba
+emits no negative-index wraparound per access; the accumulator ``dn`` is cleared by the vector store that
+emits a neuron's row, not by a loop that LLVM turns into a ``memset`` call. The sums keep their sequential
+order (no "reassoc"), so every result is the bits of the plain loops.
 """
 
 from __future__ import annotations
@@ -29,12 +36,22 @@ import math
 import numba
 import numpy as np
 
-__all__ = ["simulate_kernel", "jacobian_kernel", "simulate_step", "rtrl_step"]
+from .rowops import axpy, emit, padded
 
-# Reassociation and fused multiply-add let LLVM vectorize the loops over theta. No "nnan"/"ninf": a diverging
-# simulation must still come back as NaN/inf for the trainer to reject it.
-_FAST = {"contract", "reassoc", "nsz", "arcp"}
+__all__ = ["simulate_kernel", "jacobian_kernel", "simulate_step", "rtrl_step", "padded", "ix"]
+
+# Fused multiply-add. No "reassoc": with it LLVM vectorized the sum over a neuron's connections (gathers, from
+# 8 connections on), which changed its rounding with the code around it; the loops over theta need no
+# reassociation. No "nnan"/"ninf": a diverging simulation must still come back as NaN/inf for the trainer
+# to reject it.
+_FAST = {"contract", "nsz", "arcp"}
 PRODUCT = 10  # flat.PRODUCT_CODE: a product net input with a linear transfer
+
+
+@numba.njit(cache=True, inline="always")
+def ix(i):
+    """An index known to be >= 0, as uint64: numba then emits no negative-index wraparound for it."""
+    return np.uint64(i)
 
 
 @numba.njit(cache=True, inline="always")
@@ -145,6 +162,17 @@ def _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_
 
 
 @numba.njit(cache=True, inline="always")
+def _slots(t, ring, slot_of):
+    """Slot of ``a(t - d)`` into ``slot_of[d]`` for every d < ring (no modulo per connection); returns t's slot."""
+    slot = t % ring
+    s = slot
+    for d in range(ring):
+        slot_of[ix(d)] = s
+        s = s - 1 if s > 0 else ring - 1
+    return slot
+
+
+@numba.njit(cache=True, inline="always")
 def simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, a_buf, slot_of):
     """Eq. (1)-(2) at time t: every neuron's output into slot ``t % ring`` of the ring buffer `a_buf`.
 
@@ -152,43 +180,44 @@ def simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val
     caller's fastmath flags: the offline kernels keep theirs, the quasi-online kernel its strict IEEE order.
     """
     ring = a_buf.shape[0]
-    slot = t % ring
-    for d in range(ring):  # slot of a(t - d), refreshed each step: no modulo per connection
-        slot_of[d] = (t - d + ring) % ring
+    slot = _slots(t, ring, slot_of)
     for k in range(transfer.shape[0]):
         if transfer[k] == PRODUCT:
             a_buf[slot, k] = _product_value(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_val, conn_delay, a_buf,
                                             slot_of)
             continue
         n = 0.0
-        for c in range(conn_ptr[k], conn_ptr[k + 1]):
-            kind = conn_kind[c]
-            d = conn_delay[c]
+        for c in range(conn_ptr[ix(k)], conn_ptr[ix(k + 1)]):
+            kind = conn_kind[ix(c)]
+            d = conn_delay[ix(c)]
             if kind == 0:
-                x = a_buf[slot_of[d], conn_src[c]]
+                x = a_buf[ix(slot_of[ix(d)]), ix(conn_src[ix(c)])]
             elif kind == 1:
-                x = inputs[max(t - d, 0), conn_src[c]]
+                x = inputs[ix(max(t - d, 0)), ix(conn_src[ix(c)])]
             else:
                 x = 1.0
-            n += conn_val[c] * x
-        a_buf[slot, k] = _transfer(transfer[k], n)
+            n += conn_val[ix(c)] * x
+        a_buf[ix(slot), ix(k)] = _transfer(transfer[ix(k)], n)
 
 
 @numba.njit(cache=True, inline="always")
 def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
               a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2):
     """:func:`simulate_step` and the RTRL recursion of the module docstring: ``S(t)`` into slot ``t % ring``
-    of `s_buf` (ring, N, P).
+    of `s_buf` (ring, N, n_pad).
 
-    With `with_blk`, a second set of sensitivities `s_blk` follows the same recursion (the quasi-online
-    kernel's trial mode restarts it at zero at each block start); otherwise `s_blk` is not touched.
-    `slot_of` (ring,) int64, `dn` and `dn2` (P,) float64 are scratch.
+    The rows of `s_buf`, `s_blk`, `dn` and `dn2` have the padded length ``n_pad = padded(P)`` (:mod:`.rowops`);
+    nothing reads the padding lanes. With `with_blk`, a second set of sensitivities `s_blk` follows the same
+    recursion (the quasi-online kernel's trial mode restarts it at zero at each block start); otherwise `s_blk`
+    and `dn2` are not touched. `slot_of` (ring,) int64, `dn` and `dn2` (n_pad,) float64 are scratch.
     """
     ring = a_buf.shape[0]
-    n_theta = s_buf.shape[2]
-    slot = t % ring
-    for d in range(ring):
-        slot_of[d] = (t - d + ring) % ring
+    slot = _slots(t, ring, slot_of)
+    for p in range(dn.shape[0]):  # from here on each neuron's emit leaves the accumulators at zero
+        dn[ix(p)] = 0.0
+    if with_blk:
+        for p in range(dn2.shape[0]):
+            dn2[ix(p)] = 0.0
     for k in range(transfer.shape[0]):
         if transfer[k] == PRODUCT:  # linear transfer: S = dn
             a_buf[slot, k] = _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr,
@@ -198,44 +227,35 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
                               a_buf, s_blk, slot_of, s_blk[slot, k])
             continue
         n = 0.0
-        for p in range(n_theta):
-            dn[p] = 0.0
-        if with_blk:
-            for p in range(n_theta):
-                dn2[p] = 0.0
-        for c in range(conn_ptr[k], conn_ptr[k + 1]):
-            kind = conn_kind[c]
-            d = conn_delay[c]
-            w = conn_val[c]
+        for c in range(conn_ptr[ix(k)], conn_ptr[ix(k + 1)]):
+            kind = conn_kind[ix(c)]
+            d = conn_delay[ix(c)]
+            w = conn_val[ix(c)]
             if kind == 0:
-                src_slot = slot_of[d]
-                src = conn_src[c]
+                src_slot = ix(slot_of[ix(d)])
+                src = ix(conn_src[ix(c)])
                 x = a_buf[src_slot, src]
                 # before t = 0 the source is history, whose sensitivity is zero
                 if t - d >= 0 and w != 0.0:
-                    for p in range(n_theta):
-                        dn[p] += w * s_buf[src_slot, src, p]
+                    axpy(dn, w, s_buf[src_slot, src])
                     if with_blk:
-                        for p in range(n_theta):
-                            dn2[p] += w * s_blk[src_slot, src, p]
+                        axpy(dn2, w, s_blk[src_slot, src])
             elif kind == 1:
-                x = inputs[max(t - d, 0), conn_src[c]]
+                x = inputs[ix(max(t - d, 0)), ix(conn_src[ix(c)])]
             else:
                 x = 1.0
             n += w * x
-            for e in range(dptr[c], dptr[c + 1]):
-                dn[dtheta[e]] += x * dval[e]
+            for e in range(dptr[ix(c)], dptr[ix(c + 1)]):
+                dn[ix(dtheta[ix(e)])] += x * dval[ix(e)]
                 if with_blk:
-                    dn2[dtheta[e]] += x * dval[e]
-        code = transfer[k]
+                    dn2[ix(dtheta[ix(e)])] += x * dval[ix(e)]
+        code = transfer[ix(k)]
         a = _transfer(code, n)
-        a_buf[slot, k] = a
+        a_buf[ix(slot), ix(k)] = a
         g = _slope(code, n, a)
-        for p in range(n_theta):
-            s_buf[slot, k, p] = g * dn[p]
+        emit(s_buf[ix(slot), ix(k)], g, dn)
         if with_blk:
-            for p in range(n_theta):
-                s_blk[slot, k, p] = g * dn2[p]
+            emit(s_blk[ix(slot), ix(k)], g, dn2)
 
 
 @numba.njit(cache=True, fastmath=_FAST)
@@ -260,9 +280,10 @@ def simulate_kernel(
         simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, a_buf, slot_of)
         if (t + 1) % stride != 0:
             continue
-        slot = t % ring
+        slot = ix(t % ring)
+        row = ix(t // stride)
         for o in range(record.shape[0]):
-            out[t // stride, o] = a_buf[slot, record[o]]
+            out[row, ix(o)] = a_buf[slot, ix(record[ix(o)])]
     return out
 
 
@@ -304,19 +325,20 @@ def jacobian_kernel(
     for s in range(ring):
         for k in range(n_neurons):
             a_buf[s, k] = history[k]
-    s_buf = np.zeros((ring, n_neurons, n_theta))
-    dn = np.empty(n_theta)
+    n_pad = padded(n_theta)
+    s_buf = np.zeros((ring, n_neurons, n_pad))
+    dn = np.empty(n_pad)
     slot_of = np.empty(ring, dtype=np.int64)
     for t in range(n_steps):
         rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
                   a_buf, s_buf, s_buf, False, slot_of, dn, dn)
         if (t + 1) % stride != 0:
             continue
-        slot = t % ring
-        row = t // stride
+        slot = ix(t % ring)
+        row = ix(t // stride)
         for o in range(n_rec):
-            r = record[o]
-            y[row, o] = a_buf[slot, r]
+            r = ix(record[ix(o)])
+            y[row, ix(o)] = a_buf[slot, r]
             for p in range(n_theta):
-                dy[row, o, p] = s_buf[slot, r, p]
+                dy[row, ix(o), ix(p)] = s_buf[slot, r, ix(p)]
     return y, dy

@@ -238,7 +238,9 @@ class CompiledNetwork:
             weights[name] = float(theta[i])
         return params, weights
 
-    def _connection_values(self, theta, with_derivatives: bool):
+    def connection_values(self, theta, with_derivatives: bool = False):
+        """Every connection's value at `theta` (the flat network's order), and with `with_derivatives` the
+        values of its sparse d(value)/d(theta) entries (the kernels' ``dval``); else None."""
         params, weights = self.values(theta)
         coef = np.array([_evaluate(expr, params) for expr in self._exprs])
         wv = coef[self._weight_expr]
@@ -303,17 +305,27 @@ class CompiledNetwork:
         """
         return u if self.net.substeps == 1 else np.repeat(u, self.net.substeps, axis=0)
 
-    def _run(self, theta, inputs, init, record: np.ndarray) -> np.ndarray:
+    def _history(self, init, history) -> np.ndarray:
+        if history is None:
+            return self.initial_history(init)
+        hist = np.array(history, dtype=float)
+        if hist.shape != (self._flat.n_neurons,) or not np.all(np.isfinite(hist)):
+            raise ValueError(f"history must be {self._flat.n_neurons} finite values (one per neuron), "
+                             f"got shape {hist.shape}")
+        return hist
+
+    def _run(self, theta, inputs, init, record: np.ndarray, history=None) -> np.ndarray:
         u = self._steps(self._check_inputs(inputs))
-        hist = self.initial_history(init)
-        conn_val, _ = self._connection_values(theta, with_derivatives=False)
+        hist = self._history(init, history)
+        conn_val, _ = self.connection_values(theta, with_derivatives=False)
         f = self._flat
         return simulate_kernel(
             u, f.conn_ptr, f.conn_kind, f.conn_src, f.conn_delay, conn_val, f.transfer, hist, f.ring, record,
             self.net.substeps,
         )
 
-    def simulate(self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None) -> np.ndarray:
+    def simulate(self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None,
+                 history: np.ndarray | None = None) -> np.ndarray:
         """Network outputs for `inputs`.
 
         Parameters
@@ -322,12 +334,15 @@ class CompiledNetwork:
         inputs : (Q, n_inputs) array_like
         init : mapping, optional
             Output name -> value, for states initialised from data.
+        history : (n_neurons,) array_like, optional
+            Every neuron's output before the first step (replaces the file's initial states and `init`):
+            an initial state estimated from data (identify.initstate).
 
         Returns
         -------
         (Q, n_outputs) ndarray, possibly non-finite when theta makes the network unstable.
         """
-        return self._run(theta, inputs, init, self._flat.output_index)
+        return self._run(theta, inputs, init, self._flat.output_index, history)
 
     def jacobian(
         self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None
@@ -342,7 +357,7 @@ class CompiledNetwork:
         """
         u = self._steps(self._check_inputs(inputs))
         hist = self.initial_history(init)
-        conn_val, dval = self._connection_values(theta, with_derivatives=True)
+        conn_val, dval = self.connection_values(theta, with_derivatives=True)
         f = self._flat
         return jacobian_kernel(
             u,

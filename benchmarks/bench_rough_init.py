@@ -1,0 +1,174 @@
+"""Rough inits: how often one default start reaches the global minimum, ours against a plain trust region.
+
+The bench (issue 14): the two-mass drive simulated by `sdnn excite` (continuous RK4 plant, APRBS + relay,
+seed 1, 0.01 rad/s noise), N charts whose free physical parameters start at truth ×/÷ a log-uniform factor up
+to 3 (draw i uses ``numpy.random.default_rng([seed, i])``, one factor per free parameter in chart order), J1
+fixed at the truth. Two charts:
+
+* ``learned``: diagrams/two_mass.yaml (learned tanh friction curves, output w2) on diagrams/two_mass_plant.yaml
+  (Coulomb + Stribeck + viscous friction on both machines);
+* ``coulomb``: diagrams/two_mass_coulomb.yaml (physical Coulomb + viscous terms) on its own plant.
+
+For each draw: (a) ``ours``: LM as `identify` runs it by default (the options of
+:func:`flowchart2sdnn.identify.run.lm_options`, one start); (b) ``trf``: ``scipy.optimize.least_squares(
+method='trf', x_scale='jac')`` with the chart's bounds (min: 0 -> positivity) on the SAME residual and RTRL
+Jacobian (`Problem.fun`), so only the optimizer differs. A run "reaches the global minimum" when its cost is
+within 1.05x of the reference: the lowest of a fit started at the truth (both optimizers) and every run.
+``--variant`` runs our LM with one change (see VARIANTS) to measure what closes the gap.
+
+Run: ``python benchmarks/bench_rough_init.py --chart coulomb --n 8 --seconds 30`` (minutes per chart on a
+shared 2-core machine). Measured (seed 1; more in docs/rough_init.md):
+
+| chart, record, draws | trainlm μI (old default) | μD² (default) | scipy trf |
+|---|---|---|---|
+| coulomb, 10 s, N = 3 | 2/3, 167-668 iterations | 3/3, 22-27 | 3/3, 14-24 evaluations |
+| coulomb, 30 s, N = 8 | — | 8/8, median 44, 10.0 s | 8/8, median 21, 2.8 s |
+| learned, 10 s, N = 4 (vs best truth start) | 0/4, 3 of 4 at the 1000 limit | 1/4, 258-337 | 0/4, 116-1000 |
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import dataclasses  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from scipy.optimize import least_squares  # noqa: E402
+
+from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
+from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
+from flowchart2sdnn.identify.problem import build_problem  # noqa: E402
+from flowchart2sdnn.identify.run import lm_options  # noqa: E402
+from flowchart2sdnn.identify.settings import IdentifySettings  # noqa: E402
+from flowchart2sdnn.identify.workers import run_start  # noqa: E402
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
+
+CHARTS = {"learned": ("two_mass", "two_mass_plant"), "coulomb": ("two_mass_coulomb", "two_mass_coulomb_plant")}
+#: our LM with one change each; "default" is identify's default
+VARIANTS = {
+    "default": {},
+    "noscale": {"scale": "none"},
+    "jac-per-weight": {"scale": "jac", "scale_groups": ()},
+    "tau0": {"tau": 0.0},
+}
+FACTOR = 3.0
+GLOBAL = 1.05
+
+
+def bench_data(plant, seconds: float, seed: int, noise: float):
+    data = excite(plant, ExcitationSettings(seconds=seconds, seed=seed, noise_std=noise))
+    return dataset_from_frame(data, time="time", inputs=list(plant.input_names), outputs=list(plant.output_names),
+                              name=f"excite({plant.name}, {seconds:g} s, seed {seed})")
+
+
+def rough_chart(chart, truth: dict, rng: np.random.Generator):
+    """The chart with every free parameter's init at truth ×/÷ a log-uniform factor up to FACTOR; J1 fixed."""
+    params = []
+    for p in chart.parameters:
+        if p.name == "J1":
+            p = dataclasses.replace(p, init=truth["J1"], fixed=True)
+        elif not p.fixed:
+            p = dataclasses.replace(p, init=truth[p.name] * float(np.exp(rng.uniform(-1, 1) * np.log(FACTOR))))
+        params.append(p)
+    return dataclasses.replace(chart, parameters=tuple(params))
+
+
+def truth_chart(chart, truth: dict):
+    return dataclasses.replace(chart, parameters=tuple(
+        dataclasses.replace(p, init=truth[p.name], fixed=p.fixed or p.name == "J1") for p in chart.parameters))
+
+
+def fit_ours(chart, data, variant: dict, seed: int):
+    problem = build_problem(chart, data, seed=seed)
+    x0 = problem.compiled.theta0()
+    lo, hi = problem.bounds()
+    opts = dataclasses.replace(lm_options(IdentifySettings(seed=seed), problem), **variant)
+    t0 = time.perf_counter()
+    r = run_start(problem, x0, lo, hi, opts)
+    return problem, r.x, r.cost, time.perf_counter() - t0, r.iterations, r.status
+
+
+def fit_trf(chart, data, seed: int):
+    problem = build_problem(chart, data, seed=seed)
+    x0 = problem.compiled.theta0()
+    lo, hi = problem.bounds()
+    memo = {}
+
+    def both(x):
+        key = x.tobytes()
+        if key not in memo:
+            memo.clear()
+            out = problem.fun(x)
+            memo[key] = (None, None) if out is None else out
+        return memo[key]
+
+    def res(x):
+        e, _ = both(x)
+        return np.full(problem.n_residuals, 1e150) if e is None else -e
+
+    def jac(x):
+        return both(x)[1]
+
+    t0 = time.perf_counter()
+    r = least_squares(res, x0, jac=jac, bounds=(lo, hi), method="trf", x_scale="jac", max_nfev=1000)
+    return problem, r.x, float(r.cost), time.perf_counter() - t0, r.nfev, str(r.status)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--chart", choices=sorted(CHARTS), default="coulomb")
+    ap.add_argument("--n", type=int, default=8)
+    ap.add_argument("--seconds", type=float, default=30.0)
+    ap.add_argument("--seed", type=int, default=1, help="seed of the bench record and of the rough draws")
+    ap.add_argument("--variant", action="append", choices=sorted(VARIANTS), help="our LM variants (default: default)")
+    ap.add_argument("--no-trf", action="store_true")
+    args = ap.parse_args()
+    variants = args.variant or ["default"]
+    chart_name, plant_name = CHARTS[args.chart]
+    plant = load_diagram(ROOT / "diagrams" / f"{plant_name}.yaml")
+    chart = load_diagram(ROOT / "diagrams" / f"{chart_name}.yaml")
+    truth = {p.name: float(p.init) for p in plant.parameters}
+    data = bench_data(plant, args.seconds, args.seed, 0.01)
+    print(f"# {args.chart}: {chart_name}.yaml on {plant_name}.yaml, {args.seconds:g} s, seed {args.seed}, "
+          f"noise 0.01, N = {args.n}, factor ×/÷{FACTOR:g}")
+    runs: dict[str, list] = {v: [] for v in variants}
+    if not args.no_trf:
+        runs["trf"] = []
+    ref = []
+    for name in variants:
+        ref.append(fit_ours(truth_chart(chart, truth), data, VARIANTS[name], args.seed)[2])
+    if not args.no_trf:
+        ref.append(fit_trf(truth_chart(chart, truth), data, args.seed)[2])
+    for i in range(args.n):
+        rough = rough_chart(chart, truth, np.random.default_rng([args.seed, i]))
+        for name in runs:  # interleaved: every method on draw i before draw i + 1 (fair under shared load)
+            out = fit_trf(rough, data, args.seed) if name == "trf" else fit_ours(rough, data, VARIANTS[name],
+                                                                                  args.seed)
+            problem, x, cost, secs, evals, status = out
+            values = dict(zip(problem.names, x, strict=True))
+            runs[name].append((cost, secs, evals, status, values))
+            errs = " ".join(f"{k} {100 * (values[k] / truth[k] - 1):+.1f}%" for k in values if k in truth)
+            print(f"draw {i} {name:9s} cost {cost:10.4g} {secs:6.1f} s {evals:4d} it/ev {status:18s} {errs}",
+                  flush=True)
+    best = min([*ref] + [r[0] for rs in runs.values() for r in rs])
+    print(f"\nreference cost {best:.6g} (truth starts: {', '.join(f'{c:.6g}' for c in ref)})\n")
+    print("| optimizer | global minimum (cost <= 1.05x ref) | median s per fit | median iterations/evaluations |")
+    print("|---|---|---|---|")
+    for name, rs in runs.items():
+        hit = sum(r[0] <= GLOBAL * best for r in rs)
+        print(f"| {name} | {hit}/{len(rs)} | {np.median([r[1] for r in rs]):.1f} | "
+              f"{np.median([r[2] for r in rs]):.0f} |")
+
+
+if __name__ == "__main__":
+    main()
