@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -253,3 +254,23 @@ def test_unstable_network_returns_non_finite_without_raising():
     assert not np.isfinite(y[-1, 0])
     y2, dy = cn.jacobian(cn.theta0(), u)
     assert not np.isfinite(y2[-1, 0]) and not np.isfinite(dy[-1]).all()
+
+
+def test_rest_stability_of_overflowing_weights_is_unbounded_not_a_crash():
+    """A trial point (or a fuzzed chart) whose weights overflow has no finite linearisation at rest: the guard
+    reads it as unbounded growth instead of raising numpy's LinAlgError (found by the chart fuzzer)."""
+    from flowchart2sdnn.compiler import compile_diagram
+    from flowchart2sdnn.diagram.validate import load_diagram
+    from flowchart2sdnn.network.runtime import CompiledNetwork
+    from flowchart2sdnn.network.stability import rest_radii
+
+    net = compile_diagram(load_diagram(Path(__file__).resolve().parent.parent / "diagrams" / "engine.yaml")).network
+    cn = CompiledNetwork(net)
+    params, free = cn.values(cn.theta0())
+    values = np.array(net.weight_values(params, free), dtype=float)
+    finite = rest_radii(net, values)
+    assert all(np.isfinite(finite))
+    with np.errstate(over="ignore"):
+        values = values * 1e308 * 1e10  # every nonzero weight overflows to +-inf
+    chatter, growth = rest_radii(net, values)
+    assert growth == np.inf and chatter == 0.0

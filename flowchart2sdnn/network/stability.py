@@ -49,6 +49,7 @@ def _derivative(transfer: str, n: float) -> float:
     return 1.0
 
 
+@np.errstate(all="ignore")  # overflowing weights are handled: they give an unbounded radius, not warnings
 def rest_eigenvalues(net: Network, values: np.ndarray) -> np.ndarray:
     """Eigenvalues of the network linearized at rest, for weight values `values` (Network.weights order).
 
@@ -88,11 +89,17 @@ def rest_eigenvalues(net: Network, values: np.ndarray) -> np.ndarray:
         a[k] = _value(transfers[k], nrest[k])
     D = np.array([_derivative(t, float(x)) for t, x in zip(transfers, nrest, strict=True)], dtype=float)
     M = np.eye(n) - D[:, None] * L[0]
-    blocks = [np.linalg.solve(M, D[:, None] * L[d]) for d in range(1, dmax + 1)]
+    unbounded = np.array([np.inf])  # what a network without a finite linearisation at rest is treated as
+    try:
+        blocks = [np.linalg.solve(M, D[:, None] * L[d]) for d in range(1, dmax + 1)]
+    except np.linalg.LinAlgError:  # an algebraic loop with gain 1 at rest: no unique operating point
+        return unbounded
     companion = np.zeros((n * dmax, n * dmax))
     companion[:n, :] = np.hstack(blocks)
     if dmax > 1:
         companion[n:, :-n] = np.eye(n * (dmax - 1))
+    if not np.all(np.isfinite(companion)):  # weights so large that the linearisation overflows
+        return unbounded
     return np.linalg.eigvals(companion)
 
 
