@@ -83,3 +83,16 @@ def test_chromium_renders_the_page_and_nothing_overflows(page, tmp_path):
     assert image[:, -12:].min() == 255  # the right margin is blank: no table or figure runs off the page
     ink = np.flatnonzero(image.min(axis=1) < 128)
     assert ink.size and ink[-1] > 2000  # the figures were drawn (the page is long), not a blank or error page
+
+
+def test_the_page_draws_the_chart_inline(page):
+    """The block diagram is inline SVG (the page stays one file): one box per block and input of the chart."""
+    import re
+
+    from flowchart2sdnn.diagram.validate import load_diagram
+
+    html = page.read_text()
+    svg = re.search(r"<svg .*?</svg>", html, re.S)
+    assert svg and "http" not in svg.group(0).replace("http://www.w3.org/2000/svg", "")
+    d = load_diagram(ENGINE)
+    assert svg.group(0).count("<rect ") == len(d.blocks) + len(d.inputs)

@@ -73,17 +73,20 @@ def lint(chart: str, fmt: str) -> None:
 @click.option("-o", "--output", type=click.Path(dir_okay=False), help="Write the network file (JSON).")
 @click.option("--explain", is_flag=True, help="Print every weight as an equation and every delayed edge.")
 @click.option("--dot", type=click.Path(dir_okay=False), help="Write a Graphviz drawing of the network.")
+@click.option("--svg", type=click.Path(dir_okay=False),
+              help="Write the chart as a block diagram (SVG; no Graphviz needed).")
 @seed_option("Seed for the initial learned weights.")
 @substeps_option()
 @force_option()
 @handle_errors
-def compile_(chart: str, output: str | None, explain: bool, dot: str | None, seed: int, substeps, force: bool) -> None:
+def compile_(chart: str, output: str | None, explain: bool, dot: str | None, svg: str | None, seed: int, substeps,
+             force: bool) -> None:
     """Compile CHART into a structured GDNN with administration matrices."""
     from ..atomic import atomic_write_text, check_output_path
     from ..compiler import compile_file
     from ..network.explain import explain_network, network_dot
 
-    for path in (output, dot):
+    for path in (output, dot, svg):
         if path:
             check_output_path(path, [chart], force=force)
     comp = compile_file(chart, seed=seed, substeps=substeps)
@@ -94,10 +97,14 @@ def compile_(chart: str, output: str | None, explain: bool, dot: str | None, see
         atomic_write_text(output, net.to_json())
     if dot:
         atomic_write_text(dot, network_dot(net))
+    if svg:
+        from ..analysis.drawing import chart_svg
+
+        atomic_write_text(svg, chart_svg(comp.diagram))
     if explain:
         click.echo(explain_network(net), nl=False)
         click.echo("\n" + comp.substeps.explain(net.sample_time))
-    elif not output and not dot:
+    elif not output and not dot and not svg:
         click.echo(net.to_json(), nl=False)
 
 

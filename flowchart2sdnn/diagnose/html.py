@@ -15,7 +15,16 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..data.csvdata import Dataset
-from ..identify.html import esc, figure, identification_sections, page, paragraph, section, table
+from ..identify.html import (
+    chart_section,
+    esc,
+    figure,
+    identification_sections,
+    page,
+    paragraph,
+    section,
+    table,
+)
 from .loop import Diagnosis
 from .plots import figures
 from .summary import STOP_MESSAGES, _candidate_rows, _fit_pct
@@ -101,4 +110,6 @@ def diagnosis_html(diagnosis: Diagnosis, train: Dataset, validation: Sequence[Da
     parts.append(section("Final chart", [paragraph(f"'{diagnosis.diagram.name}' with the accepted effects, "
                                                    "identified:")], "final"))
     parts += final_parts
+    added = {b.name for b in diagnosis.diagram.blocks} - {b.name for b in diagnosis.nominal.diagram.blocks}
+    parts.append(chart_section(diagnosis.diagram, added, "The final chart (added blocks in orange)"))
     return page(f"{name}: diagnosis", parts, f"diagnosis of chart '{name}' on {Path(train.path).name}")

@@ -24,6 +24,7 @@ from ..atomic import atomic_write_text
 from .canvas import png_bytes
 
 __all__ = ["page", "table", "figure", "section", "paragraph", "identification_sections", "bode_section",
+           "chart_section",
            "identification_html", "write_html"]
 
 _STYLE = """
@@ -212,6 +213,14 @@ def identification_sections(outcome, records=(), validation=(), fixed_from: Sequ
     return parts
 
 
+def chart_section(diagram, highlight=(), title: str = "The chart") -> str:
+    """The chart as a block diagram (inline SVG: the page stays one file), highlighted blocks in orange."""
+    from ..analysis.drawing import chart_svg
+
+    svg = chart_svg(diagram, highlight)
+    return section(title, ['<div style="overflow-x:auto">' + svg + "</div>"], "chart")
+
+
 def identification_html(outcome, records=(), validation=(), fixed_from: Sequence[str] = (),
                         command: str = "") -> str:
     """The whole page of one identification (see the module docstring)."""
@@ -229,7 +238,8 @@ def identification_html(outcome, records=(), validation=(), fixed_from: Sequence
     files = ", ".join(Path(r.file).name for r in outcome.data.train_records if r.file)
     subtitle = f"identification of chart '{d.name}'" + (f" on {files}" if files else "")
     return page(f"{d.name}: identification", [*head, *identification_sections(outcome, records, validation,
-                                                                               fixed_from)], subtitle)
+                                                                               fixed_from), chart_section(d)],
+                subtitle)
 
 
 def write_html(path: str | Path, text: str) -> Path:
