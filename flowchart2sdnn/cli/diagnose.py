@@ -87,6 +87,11 @@ def _int_list(text: str) -> tuple[int, ...]:
               help="dead_time scans n = 1..this many samples.")
 @click.option("--harmonics", default="1,2,3,4,6,8,12", show_default=True,
               help="cogging harmonics p to try.")
+@click.option("--init-window", type=click.IntRange(min=1), default=None,
+              help="Fit each --validate record's initial state on its first N samples (parameters fixed) and score "
+                   "it from sample N on (the public benchmarks' protocol).")
+@click.option("--allow-unconverged", is_flag=True,
+              help="Trace even when the first fit of the chart as given did not converge (default: refuse).")
 @alignment_option()
 @substeps_option()
 @data_options
@@ -97,8 +102,8 @@ def _int_list(text: str) -> tuple[int, ...]:
 @executor_options("the candidate refits")
 @handle_errors
 def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
-             refit_iter, max_iter, horizon, top, criterion, min_gain, alpha, dead_time_max, harmonics, alignment,
-             substeps, mapping, units, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
+             refit_iter, max_iter, horizon, top, criterion, min_gain, alpha, dead_time_max, harmonics, init_window,
+             allow_unconverged, alignment, substeps, mapping, units, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
     """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
     chart, refit, and report the error before and after."""
     from ..atomic import atomic_write_text, check_output_path
@@ -113,6 +118,8 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
 
     if validation and split:
         raise click.UsageError("give either --validate or --split, not both")
+    if init_window and not validation:
+        raise click.UsageError("--init-window sets the initial state of the --validate records: give one")
     cogging_p = _int_list(harmonics)
     inputs = list(data) + [chart] + list(validation) + ([effects_file] if effects_file else [])
     for path in (output, report_path, html_path):
@@ -139,7 +146,8 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     with settings_usage():
         settings = DiagnoseSettings(rounds=rounds, top=top, refit_iter=refit_iter, max_iter=max_iter,
                                     alpha=alpha, criterion=criterion, min_gain=min_gain, alignment=alignment,
-                                    seed=seed, split=split, horizon=horizon)
+                                    seed=seed, split=split, horizon=horizon,
+                                    require_converged=not allow_unconverged, init_window=init_window or 0)
     progress = Progress(quiet)
     executor = None
     try:
@@ -185,6 +193,12 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
         click.echo(format_report(report), nl=False)
         for path in [p for p in (output, report_path) if p] + [str(w) for w in written]:
             click.echo(f"wrote {path}")
+    if report["stop"] == "first_fit_not_converged":
+        # exit 1 (a failed run), after the report is written: REPORT.json holds the unconverged fit
+        first = report["first_fit"]
+        click.echo(f"error: {chart}: the first fit did not converge ({first['status']}), nothing traced; "
+                   "raise --max-iter or improve the chart's init (or --allow-unconverged)", err=True)
+        sys.exit(1)
     if report.get("interrupted"):
         click.echo("interrupted: the chart and report hold what was accepted before Ctrl-C", err=True)
         sys.exit(1)

@@ -28,6 +28,8 @@ backlash       spring angle        c*x becomes c*x + an odd learned curve (v = 0
 dead_zone      spring angle        c*x becomes c*(x - g*sat(x/g)): exact backlash of half gap g (scanned)
 cogging        speed               phi = integral(speed); A sin(p phi) + B cos(p phi) (A = B = 0) in the sum
                                    (p with a period beyond 2 RMS of a position the chart has: not offered)
+overflow       integrator state    x' = f - K relu(x - L): x held at a learned level L (or above a lower one),
+                                   the excess lost or routed into a downstream integrator (:mod:`.overflow`)
 =============  ==================  =====================================================================
 """
 
@@ -52,6 +54,7 @@ from .graph import (
     speeds,
     spring_angles,
 )
+from .overflow import Overflow
 
 __all__ = [
     "Scales",
@@ -65,6 +68,7 @@ __all__ = [
     "Backlash",
     "DeadZone",
     "Cogging",
+    "Overflow",
     "BUILTIN_EFFECTS",
     "builtin_effects",
     "effect_library",
@@ -81,7 +85,7 @@ class Scales:
     rms : mapping str -> float
         Root mean square of chart signals (from a simulation of the current fit) and of the inputs.
     lo, hi : mapping str -> float
-        Smallest and largest value of each input.
+        Smallest and largest value of each input and of each chart signal (the current fit's simulation).
     """
 
     rms: Mapping[str, float] = field(default_factory=dict)
@@ -526,7 +530,8 @@ class Cogging:
 
 # ------------------------------------------------------------------------------------------------ registry
 BUILTIN_EFFECTS: dict[str, Effect] = {
-    e.name: e for e in (Friction(), Damping(), DeadTime(), Saturation(), Backlash(), DeadZone(), Cogging())
+    e.name: e for e in (Friction(), Damping(), DeadTime(), Saturation(), Backlash(), DeadZone(), Cogging(),
+                        Overflow())
 }
 
 

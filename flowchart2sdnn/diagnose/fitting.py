@@ -16,7 +16,8 @@ from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify.floor import measure_floor, pooled_floor
-from ..identify.problem import Problem, build_problem, metrics
+from ..identify.initstate import estimate_initial_state
+from ..identify.problem import Problem, build_problem, data_init, metrics
 from ..identify.run import Identification, IdentifySettings, identify
 from ..identify.settings import REFIT_TAU
 from .effects import Scales
@@ -57,6 +58,11 @@ class DiagnoseSettings:
     # RMS 0.079 against 0.056)
     horizon: int = 500
     lm_tau: float = REFIT_TAU  # see identify.settings: the brief refits start next to a fit
+    # trace only from a converged first fit (False: --allow-unconverged, trace anyway)
+    require_converged: bool = True
+    # > 0: each validation record's initial state is fitted on its first init_window samples (identify.initstate)
+    # and the record is scored from there (the public benchmarks' protocol)
+    init_window: int = 0
 
     def __post_init__(self) -> None:
         if self.rounds < 0:
@@ -75,6 +81,10 @@ class DiagnoseSettings:
             raise ValueError("horizon must not be negative")
         if self.split is not None and not 0 < self.split < 1:
             raise ValueError("split must lie strictly between 0 and 1")
+        if not (isinstance(self.init_window, int) and self.init_window >= 0):
+            raise ValueError(f"init_window must be a whole number >= 0, got {self.init_window!r}")
+        if self.init_window and self.split is not None:
+            raise ValueError("init_window applies to separate validation records, not to a split")
 
 
 @dataclass(frozen=True, eq=False)
@@ -135,9 +145,22 @@ def _rms_all(ms: Sequence[dict], n_out: int) -> float:
     return math.sqrt(sse / cnt) if cnt else math.nan
 
 
-def _validate(ident: Identification, records: Sequence[tuple[Dataset, int]], alignment: str) -> dict:
+def _validate(ident: Identification, records: Sequence[tuple[Dataset, int]], alignment: str,
+              init_window: int = 0) -> dict:
+    """Free-run metrics on each validation record from its first scored row; with `init_window` each record
+    starts from the integrators' state fitted on its first `init_window` rows (parameters fixed) and is scored
+    from the later of that row and the record's own first row."""
     compiled = ident.problem.compiled
-    per = [metrics(compiled, ident.x, ds, alignment, score_from=start) for ds, start in records]
+    per = []
+    for ds, start in records:
+        if init_window:
+            state = estimate_initial_state(compiled, ident.x, ds, alignment, init_window,
+                                           data_init(ident.problem.network, ds))
+            m = metrics(compiled, ident.x, ds, alignment, score_from=max(start, init_window), history=state.history)
+            m["initial_state"] = state.to_dict()
+        else:
+            m = metrics(compiled, ident.x, ds, alignment, score_from=start)
+        per.append(m)
     return {"rms_all": _rms_all(per, compiled.n_outputs), "records": per,
             "rms_records": [_rms_all([m], compiled.n_outputs) for m in per]}
 
@@ -160,7 +183,7 @@ def _fitted(ident: Identification, records, settings: DiagnoseSettings, extra_do
     cost = ident.fit.train.cost
     cost = math.inf if cost is None else float(cost)
     return Fitted(ident, cost, ident.problem.n_residuals, len(ident.problem.names) + extra_dof,
-                  _validate(ident, records, settings.alignment), start, accepted)
+                  _validate(ident, records, settings.alignment, settings.init_window), start, accepted)
 
 
 def with_floor(fitted: Fitted, records, settings: DiagnoseSettings) -> Fitted:
@@ -220,7 +243,9 @@ def effect_scales(problem: Problem) -> Scales:
     x = problem.compiled.theta0()
     sig = _signals(problem, x)
     rms = {k: float(np.sqrt(np.mean(v**2))) for k, v in sig.items() if np.all(np.isfinite(v))}
-    lo, hi = {}, {}
+    # a signal's range: where a state limit (overflow) is scanned
+    lo = {k: float(np.min(v)) for k, v in sig.items() if k in rms}
+    hi = {k: float(np.max(v)) for k, v in sig.items() if k in rms}
     u_all = _inputs(problem)
     for i, name in enumerate(problem.compiled.input_names):
         u = u_all[:, i]

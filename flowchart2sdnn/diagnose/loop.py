@@ -37,6 +37,8 @@ from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..strictjson import finite_or_none
 from .effects import BUILTIN_EFFECTS, Effect, Scales
+from .entries import round_entry as _round_entry
+from .entries import summary as _summary
 from .fitting import (
     DEFAULT_SPLIT,
     DiagnoseSettings,
@@ -53,7 +55,7 @@ from .fitting import (
 from .score import Candidate, Score, Screen, screen
 
 __all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "refit_unit", "refusal", "fit_chart", "horizons",
-           "candidates", "done_key", "REPORT_FORMAT", "REPORT_VERSION"]
+           "candidates", "done_key", "whole_run_stop", "REPORT_FORMAT", "REPORT_VERSION"]
 
 REPORT_FORMAT = "sdnn-diagnose"
 REPORT_VERSION = 1
@@ -71,15 +73,6 @@ class Diagnosis:
 
 
 # ------------------------------------------------------------------------------------------------ helpers
-def _summary(f: Fitted) -> dict:
-    res = f.identification.fit.train
-    val = f.validation["records"]
-    return {"rms": finite_or_none(f.rms), "validation_rms": finite_or_none(f.validation_rms), "aic": finite_or_none(f.aic), "bic": finite_or_none(f.bic),
-            "cost": finite_or_none(f.cost), "k": f.k, "validation_floor": finite_or_none(f.validation_floor), "rms_per_output": dict(res.rms), "fit_percent": dict(res.fit_percent),
-            "validation_rms_per_output": [m["rms"] for m in val],
-            "validation_fit_percent": [m["fit_percent"] for m in val]}
-
-
 def candidates(effects: Sequence[Effect], current: Diagram, scales: Scales, done: set) -> list[Candidate]:
     out = []
     for effect in effects:
@@ -145,6 +138,15 @@ def refusal(after: Fitted, before: Fitted, settings: DiagnoseSettings) -> str | 
     if not after.criterion(settings.criterion) < before.criterion(settings.criterion):
         return f"{settings.criterion.upper()} did not fall"
     return None
+
+
+def whole_run_stop(last_round: str, n_accepted: int) -> str:
+    """The report's ``stop``: how the whole run ended. After accepting effects the loop ends when the next round
+    finds nothing more ("done_after_accepting"; which way is in ``last_round``): a bare "nothing_accepted"
+    there read as if the run had found nothing."""
+    if n_accepted and last_round in ("nothing_significant", "nothing_accepted", "no_candidates"):
+        return "done_after_accepting"
+    return last_round
 
 
 def _repeatable(effect: Effect) -> bool:
@@ -213,7 +215,11 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
     settings = settings or DiagnoseSettings()
     effects = tuple(BUILTIN_EFFECTS.values()) if effects is None else tuple(effects)
     train = [train] if isinstance(train, Dataset) else list(train)
+    if settings.init_window and not validation:
+        raise ValueError("init_window sets the initial state of validation records: give some")
     train, records, split = _split(train, list(validation), settings.split)
+    # scored from the initial-state window on (the window's rows set the state): the floor too
+    records = [(ds, max(start, settings.init_window)) for ds, start in records]
 
     def say(text: str, fraction: float | None = None) -> None:
         if progress:
@@ -228,10 +234,15 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
     stop_reason = "rounds"
     interrupted = _was_interrupted(nominal)
     timing = {"nominal_fit": time.perf_counter() - t_start, "screen": [], "refit": []}
+    # an unconverged first fit is no baseline: the effect that lets a refit escape its unfinished descent (or
+    # its local minimum) "explains" the residual whether the plant has it or not (issue 16: train RMS 1.28 on
+    # a chart whose best fit is 0.06, then false alarms)
+    unconverged = (not interrupted and settings.require_converged
+                   and nominal.identification.converged is False)
     try:
         if interrupted:
             raise KeyboardInterrupt
-        for r in range(1, settings.rounds + 1):
+        for r in range(1, settings.rounds + 1 if not unconverged else 1):
             problem = current_problem(current, train, settings)
             cands = candidates(effects, current.diagram, effect_scales(problem), done)
             if not cands:
@@ -296,7 +307,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             if stop_now:
                 raise KeyboardInterrupt
         else:
-            stop_reason = "rounds"
+            stop_reason = "first_fit_not_converged" if unconverged else "rounds"
     except (KeyboardInterrupt, SystemError) as exc:
         # Ctrl-C (inside a numba kernel it surfaces as a SystemError caused by it): keep the last accepted chart
         # and report what was done; the CLI writes it marked interrupted
@@ -308,7 +319,11 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
     report = {
         "format": REPORT_FORMAT,
         "version": REPORT_VERSION,
-        "stop": stop_reason,
+        "stop": whole_run_stop(stop_reason, len(accepted)),
+        "last_round": stop_reason,
+        "n_accepted": len(accepted),
+        "first_fit": {"converged": nominal.identification.converged, "status": nominal.identification.status,
+                      "message": nominal.identification.message},
         "interrupted": interrupted,
         "candidates": candidates_out,
         "rounds": rounds,
@@ -384,22 +399,3 @@ def _refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Dataset],
             chosen[i] = fitted
     for i, s in enumerate(best):
         yield s, chosen[i], seconds[i]
-
-
-def _round_entry(r: int, s: Score, before: Fitted, after: Fitted | None, accepted: bool, reason: str,
-                 settings: DiagnoseSettings) -> dict:
-    c = s.candidate
-    a = after
-    return {
-        "round": r, "effect": c.name, "at": c.at, "option": s.as_dict()["option"], "label": c.label,
-        "accepted": accepted, "reason": reason, "start": a.start if a else None,
-        "score": finite_or_none(s.score), "predicted_decrease": finite_or_none(s.score),
-        "achieved_decrease": finite_or_none(before.cost - a.cost) if a else None,
-        "rms_before": finite_or_none(before.rms), "rms_after": finite_or_none(a.rms) if a else None,
-        "validation_rms_before": finite_or_none(before.validation_rms),
-        "validation_rms_after": finite_or_none(a.validation_rms) if a else None,
-        "aic_before": finite_or_none(before.aic), "aic_after": finite_or_none(a.aic) if a else None,
-        "bic_before": finite_or_none(before.bic), "bic_after": finite_or_none(a.bic) if a else None,
-        "before": _summary(before), "after": _summary(a) if a else None,
-        "parameters": (a.identification.values if a else None),
-    }

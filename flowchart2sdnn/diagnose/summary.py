@@ -13,6 +13,10 @@ STOP_MESSAGES = {
     "nothing_significant": "no candidate's score test was significant",
     "nothing_accepted": "no refitted candidate lowered both the validation error and the information criterion",
     "no_candidates": "no effect of the library attaches anywhere in the chart",
+    "done_after_accepting": "effects were accepted, then the next round found nothing more to accept",
+    "first_fit_not_converged": "the first fit of the chart as given did not converge: nothing was traced "
+                               "(raise --max-iter, improve the chart's init, or --allow-unconverged)",
+    "interrupted": "interrupted (Ctrl-C)",
 }
 
 
@@ -95,7 +99,11 @@ def format_report(report: dict, limit: int = 10) -> str:
     out.append("")
     out.append("accepted: " + (", ".join(f"{a['effect']} at {a['at']}" + (f" ({a['label']})" if a.get("label")
                                                                           else "") for a in accepted) or "nothing"))
-    out.append(f"stopped: {STOP_MESSAGES.get(report['stop'], report['stop'])}")
+    stop = STOP_MESSAGES.get(report["stop"], report["stop"])
+    last = report.get("last_round")
+    if report["stop"] == "done_after_accepting" and last:
+        stop += f" ({STOP_MESSAGES.get(last, last)})"
+    out.append(f"stopped: {stop}")
     w = report.get("whiteness", {})
     out.append("")
     out.append("residual before: " + _whiteness(w.get("before")))
