@@ -87,6 +87,8 @@ def dump_diagram(diagram: Diagram, identified: Mapping | None = None) -> str:
                 spec[key] = _yaml_number(value) if isinstance(value, float) else value
         if p.fixed:
             spec["fixed"] = True
+        if p.per_record:
+            spec["per_record"] = True
         if p.description:
             spec["description"] = p.description
         params[p.name] = spec

@@ -65,6 +65,8 @@ class Parameter:
     fixed: bool = False
     description: str | None = None
     location: Location | None = None
+    # with several training records, one value per record (identify.problem); last so positional use stays
+    per_record: bool = False
 
 
 @dataclass(frozen=True)

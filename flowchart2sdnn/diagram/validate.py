@@ -41,7 +41,7 @@ MAX_DELAY = 100_000
 TOP_KEYS = ("sdnn", "name", "description", "sample_time", "substeps", "delays", "inputs", "outputs", "parameters",
             "blocks", "identified")
 SIGNAL_KEYS = ("unit", "description")
-PARAM_KEYS = ("init", "unit", "min", "max", "fixed", "description")
+PARAM_KEYS = ("init", "unit", "min", "max", "fixed", "description", "per_record")
 COMMON_BLOCK_KEYS = ("type", "unit", "description")
 BLOCK_KEYS: dict[str, tuple[str, ...]] = {
     "sum": ("in",),
@@ -295,6 +295,7 @@ class _Validator:
                     fixed=self.flag(spec, "fixed", path),
                     description=self.optional_str(spec, "description", path),
                     location=self.loc(*path),
+                    per_record=self.flag(spec, "per_record", path),
                 )
             )
         return out

@@ -164,8 +164,8 @@ def sqrt_domain_warnings(problem: Problem, x: np.ndarray) -> list[str]:
     counts = dict.fromkeys(layers, 0)
     lowest = dict.fromkeys(layers, 0.0)
     total = 0
-    for s in problem.segments:
-        signals = problem.compiled.signals(x, s.inputs, s.init)
+    for k, s in enumerate(problem.segments):
+        signals = problem.compiled.signals(problem.record_x(x, k), s.inputs, s.init)
         total += s.inputs.shape[0]
         for name in layers:
             a = signals[name]

@@ -10,6 +10,8 @@ The Jacobian of those few rows with respect to the few states comes from central
 short simulations per state; relative step 1e-6, truncation and rounding errors about 1e-10 relative), not from
 RTRL: the kernel differentiates with respect to weights only. Tests compare the estimate with the known state
 of a continuous plant started in motion and with scipy's least_squares on the same residual.
+Per-record parameters (`per_record: true`) have no value of their own on a validation record: they are fitted
+here with the states (same LM, same finite differences), the shared parameters staying fixed.
 Other delayed neurons (a friction or torque read one step late) keep the chart's history: their one-step
 inconsistency with the fitted states is absorbed by the fit of the states.
 
@@ -18,7 +20,7 @@ Layer: identify (below it: fit, network, data).
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
@@ -49,6 +51,9 @@ class InitialStateFit:
     history : ndarray            every neuron's value before the first step, for CompiledNetwork.simulate
     cost : float                 1/2 sum of squared errors on the window
     status : str                 the LM status of the states' fit
+    parameters : {name: float}   per-record parameters fitted on the window with the states (else empty)
+    parameter_stderr : {name: float|None}
+    theta : ndarray|None         the theta the record runs with (the fitted per-record values in it)
     """
 
     window: int
@@ -57,11 +62,20 @@ class InitialStateFit:
     history: np.ndarray
     cost: float
     status: str
+    parameters: dict[str, float] = field(default_factory=dict)
+    parameter_stderr: dict[str, float | None] = field(default_factory=dict)
+    theta: np.ndarray | None = None
 
     def to_dict(self) -> dict:
-        return {"window": self.window, "values": dict(self.values), "stderr": dict(self.stderr),
-                "cost": self.cost, "status": self.status,
-                "method": "Levenberg-Marquardt on the window, central finite differences, parameters fixed"}
+        out = {"window": self.window, "values": dict(self.values), "stderr": dict(self.stderr),
+               "cost": self.cost, "status": self.status,
+               "method": "Levenberg-Marquardt on the window, central finite differences, parameters fixed"}
+        if self.parameters:
+            out["parameters"] = dict(self.parameters)
+            out["parameter_stderr"] = dict(self.parameter_stderr)
+            out["method"] = ("Levenberg-Marquardt on the window, central finite differences, shared parameters "
+                             "fixed, per-record parameters fitted with the states")
+        return out
 
 
 def state_neurons(compiled) -> list[tuple[int, str]]:
@@ -81,11 +95,12 @@ def _columns(data: Dataset, names) -> np.ndarray:
 
 
 def estimate_initial_state(compiled, theta, data: Dataset, alignment: str, window: int,
-                           init=None) -> InitialStateFit:
+                           init=None, params=()) -> InitialStateFit:
     """Fit the integrators' initial values of `data` on its first `window` rows with `theta` fixed.
 
     The start is the chart's initial state (`init`: the data-initialised outputs), with every measured output
-    that is itself an integrator started at its first sample.
+    that is itself an integrator started at its first sample. `params` (names in ``compiled.names``: the
+    per-record parameters) are fitted together with the states, from their values in `theta`.
     """
     if window > data.n_rows or window < 1:
         raise SdnnError.at("DATA004", f"the initial-state window of {window} samples needs at least {window} rows "
@@ -102,15 +117,23 @@ def estimate_initial_state(compiled, theta, data: Dataset, alignment: str, windo
             base[k] = y[0, measured[k]]
     names = tuple(name for _, name in states)
     index = np.array([k for k, _ in states], dtype=np.int64)
+    params = tuple(params)
+    where = np.array([compiled.names.index(p) for p in params], dtype=np.int64)
+    n = len(names)
 
     def history(s: np.ndarray) -> np.ndarray:
         h = base.copy()
-        h[index] = s
+        h[index] = s[:n]
         return h
+
+    def theta_of(s: np.ndarray) -> np.ndarray:
+        t = theta.copy()
+        t[where] = s[n:]
+        return t
 
     def residual(s: np.ndarray):
         with np.errstate(all="ignore"):
-            yhat = run_aligned(compiled, theta, u, alignment, history=history(s))
+            yhat = run_aligned(compiled, theta_of(s), u, alignment, history=history(s))
         e = (y - yhat).ravel()
         return e if np.all(np.isfinite(e)) else None
 
@@ -130,15 +153,18 @@ def estimate_initial_state(compiled, theta, data: Dataset, alignment: str, windo
             jac[:, i] = (ed - eu) / (2 * step)  # d yhat / d s = -d e / d s
         return e, jac
 
-    s0 = base[index]
-    if not names:
+    s0 = np.concatenate([base[index], theta[where]])
+    if not names and not params:
         e = residual(s0)
         cost = float("nan") if e is None else 0.5 * float(e @ e)
-        return InitialStateFit(window, {}, {}, base, cost, "nothing_to_fit")
-    r = levenberg_marquardt(fun, s0, names, options=_OPTIONS, residual=residual)
-    stderr = _stderr(r.jac, r.residual, names)
-    return InitialStateFit(window, dict(zip(names, (float(v) for v in r.x), strict=True)), stderr,
-                           history(np.asarray(r.x)), float(r.cost), r.status)
+        return InitialStateFit(window, {}, {}, base, cost, "nothing_to_fit", theta=theta)
+    r = levenberg_marquardt(fun, s0, names + params, options=_OPTIONS, residual=residual)
+    stderr = _stderr(r.jac, r.residual, names + params)
+    x = np.asarray(r.x, dtype=float)
+    return InitialStateFit(window, dict(zip(names, (float(v) for v in x[:n]), strict=True)),
+                           {k: stderr[k] for k in names}, history(x), float(r.cost), r.status,
+                           dict(zip(params, (float(v) for v in x[n:]), strict=True)), {k: stderr[k] for k in params},
+                           theta_of(x))
 
 
 def _stderr(jac: np.ndarray, e: np.ndarray, names) -> dict[str, float | None]:

@@ -76,10 +76,44 @@ class Problem:
     stability_floor: tuple[float, float] = (0.0, 0.0)
     # further training records, each simulated from its own initial state; residuals are concatenated
     extra: tuple[Segment, ...] = ()
+    # free parameters with one value per training record (`per_record: true`, several records only): the
+    # compiled theta holds record 1's value, names gets one more quantity "name@k" for every further record k
+    record_params: tuple[str, ...] = ()
 
     @property
     def names(self) -> tuple[str, ...]:
-        return self.compiled.names
+        return self.compiled.names + tuple(f"{p}@{k}" for p in self.record_params
+                                           for k in range(2, len(self.extra) + 2))
+
+    def record_index(self) -> dict[str, list[int]]:
+        """{per-record parameter: [its index in `names` for record 1, 2, ...]}."""
+        base = {n: i for i, n in enumerate(self.names)}
+        return {p: [base[p]] + [base[f"{p}@{k}"] for k in range(2, len(self.extra) + 2)]
+                for p in self.record_params}
+
+    def record_x(self, x: np.ndarray, k: int) -> np.ndarray:
+        """The compiled network's theta for training record k (0-based): its own per-record values."""
+        x = np.asarray(x, dtype=float)
+        xk = x[:len(self.compiled.names)].copy()
+        for idx in self.record_index().values():
+            xk[idx[0]] = x[idx[k]]
+        return xk
+
+    def mean_x(self, x: np.ndarray) -> np.ndarray:
+        """The compiled theta with every per-record parameter at the mean over the training records (the value
+        a record without its own fit gets: the identified chart's `init`)."""
+        x = np.asarray(x, dtype=float)
+        xm = x[:len(self.compiled.names)].copy()
+        for idx in self.record_index().values():
+            xm[idx[0]] = float(np.mean(x[idx]))
+        return xm
+
+    def expand(self, xc: np.ndarray) -> np.ndarray:
+        """A compiled theta as a start of this problem: every record starts at the same per-record values."""
+        xc = np.asarray(xc, dtype=float)
+        i = {n: j for j, n in enumerate(self.compiled.names)}
+        more = [xc[i[p]] for p in self.record_params for _ in self.extra]
+        return np.concatenate([xc, np.asarray(more, dtype=float)]) if more else xc
 
     @property
     def n_residuals(self) -> int:
@@ -92,22 +126,33 @@ class Problem:
     def fun(self, x: np.ndarray):
         """(e, J) for LM: e = y - yhat flattened, J = d yhat / d x. None when the simulation diverges."""
         es, js = [], []
-        for s in self.segments:
+        index = self.record_index()
+        for k, s in enumerate(self.segments):
             with _interruptible():
-                yhat, jac = self.compiled.jacobian(x, s.inputs, s.init)
+                yhat, jac = self.compiled.jacobian(self.record_x(x, k) if index else x, s.inputs, s.init)
             if not np.all(np.isfinite(yhat)) or not np.all(np.isfinite(jac)):
                 return None
             es.append((s.targets - yhat).ravel())
-            js.append(jac.reshape(-1, jac.shape[-1]))
+            jac = jac.reshape(-1, jac.shape[-1])
+            if index:  # record k's own quantity takes the column of the parameter; the others see 0
+                full = np.zeros((jac.shape[0], len(self.names)))
+                full[:, :jac.shape[1]] = jac
+                for idx in index.values():
+                    full[:, idx[k]] = jac[:, idx[0]]
+                    if k:
+                        full[:, idx[0]] = 0.0
+                jac = full
+            js.append(jac)
         if len(es) == 1:
             return es[0], js[0]
         return np.concatenate(es), np.vstack(js)
 
     def residual(self, x: np.ndarray):
         es = []
-        for s in self.segments:
+        index = self.record_index()
+        for k, s in enumerate(self.segments):
             with _interruptible():
-                yhat = self.compiled.simulate(x, s.inputs, s.init)
+                yhat = self.compiled.simulate(self.record_x(x, k) if index else x, s.inputs, s.init)
             if not np.all(np.isfinite(yhat)):
                 return None
             es.append((s.targets - yhat).ravel())
@@ -120,8 +165,12 @@ class Problem:
         sample whatever the step; chatter is per step (> 1 is > 1 in any power): with sub-steps the guard's
         bound on a curve's slope at zero is 2*J/h.
         """
-        params, free = self.compiled.values(x)
-        chatter, growth = rest_radii(self.network, self.network.weight_values(params, free))
+        chatter = growth = 0.0
+        # a per-record value may change the linearization (a gain): the worst record counts
+        for k in range(len(self.segments) if self.record_params else 1):
+            params, free = self.compiled.values(self.record_x(x, k))
+            c, g = rest_radii(self.network, self.network.weight_values(params, free))
+            chatter, growth = max(chatter, c), max(growth, g)
         n = self.network.substeps
         return chatter, (growth if n == 1 else growth ** n)
 
@@ -131,7 +180,7 @@ class Problem:
         params = {p.name: p for p in self.network.parameters}
         lo, hi = [], []
         for name in self.names:
-            p = params.get(name)
+            p = params.get(name.partition("@")[0] if "@" in name else name)
             lo.append(-np.inf if p is None or p.min is None else p.min)
             hi.append(np.inf if p is None or p.max is None else p.max)
         return np.array(lo, dtype=float), np.array(hi, dtype=float)
@@ -174,7 +223,10 @@ def build_problem(diagram: Diagram, data: Dataset, alignment: str = "zoh", seed:
     first = _one_problem(diagram, network, CompiledNetwork(network), data, alignment)
     extra = tuple(Segment(p.inputs, p.targets, p.init)
                   for p in (_one_problem(diagram, network, first.compiled, d, alignment) for d in more))
-    return replace(first, extra=extra) if extra else first
+    if not extra:
+        return first
+    own = tuple(p.name for p in diagram.parameters if p.per_record and p.name in first.compiled.names)
+    return replace(first, extra=extra, record_params=own)
 
 
 def _one_problem(diagram: Diagram, network: Network, compiled: CompiledNetwork, data: Dataset,
@@ -236,14 +288,15 @@ def metrics(compiled: CompiledNetwork, x: np.ndarray, data: Dataset, alignment: 
 
 def combined_metrics(per_record: list[dict], problem: Problem, x: np.ndarray, records: list[Dataset],
               alignment: str) -> dict:
-    """Training metrics over several records: E summed, RMS and fit % over all their scored samples."""
+    """Training metrics over several records: E summed, RMS and fit % over all their scored samples (`x` the
+    problem's point: each record runs with its own per-record values)."""
     names = problem.compiled.output_names
     errors, targets = [], []
-    for d in records:
+    for k, d in enumerate(records):
         u = np.column_stack([np.asarray(d.columns[i.name], dtype=float) for i in problem.network.inputs])
         y = np.column_stack([np.asarray(d.columns[n], dtype=float) for n in names])
         rows = fitted_rows(d.n_rows, alignment)
-        yhat = run_aligned(problem.compiled, x, u, alignment, data_init(problem.network, d))
+        yhat = run_aligned(problem.compiled, problem.record_x(x, k), u, alignment, data_init(problem.network, d))
         errors.append(y[rows] - yhat[rows])
         targets.append(y[rows])
     e, y = np.vstack(errors), np.vstack(targets)

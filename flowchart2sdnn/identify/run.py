@@ -33,6 +33,7 @@ from ..fit.multistart import draw_starts, run_multistart
 from .evidence import assess, no_excitation_message, on_bound_warnings, sqrt_domain_warnings, start_stability
 from .floor import floor_warnings, measure_floor
 from .initstate import estimate_initial_state
+from .perrecord import per_record_estimates
 from .problem import Problem, build_problem, combined_metrics, data_init, metrics
 from .result import (
     ChartSource,
@@ -109,7 +110,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         raise SdnnError.at("FIT004", f"quasi-online identification runs one network step per sample, and this "
                            f"chart asks for {problem.network.substeps} (substeps: {diagram.substeps})",
                            diagram.file, hint="give --substeps 1 with --online, or identify offline")
-    x0 = problem.compiled.theta0()
+    x0 = problem.expand(problem.compiled.theta0())  # every record's own value starts at the chart's
     problem, warnings = start_stability(problem, x0)
     lower, upper = problem.bounds()
     warnings += on_bound_warnings(problem.names, x0, lower, upper)
@@ -138,6 +139,9 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     if status != "diverged_at_start":
         warnings.extend(sqrt_domain_warnings(problem, x))
 
+    # x holds every record's own value of a per-record parameter; the chart and the rest see their mean
+    xs, x = x, problem.mean_x(x)
+    per_record, means = per_record_estimates(problem, xs, evidence, [d.path for d in [train] + more])
     params, _ = problem.compiled.values(x)
     curves = _curves(problem, x)
     index = {n: i for i, n in enumerate(problem.names)}
@@ -145,13 +149,15 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     for p in diagram.parameters:
         i = index.get(p.name)
         stderr = ci = None
-        if i is not None and evidence.stderr is not None and np.isfinite(evidence.stderr[i]):
+        if p.name in means:
+            _, stderr, ci = means[p.name]
+        elif i is not None and evidence.stderr is not None and np.isfinite(evidence.stderr[i]):
             stderr, half = float(evidence.stderr[i]), float(evidence.half[i])
             ci = (float(params[p.name] - half), float(params[p.name] + half))
         parameters[p.name] = Estimate(float(params[p.name]), float(p.init), stderr, ci, p.unit, i is None)
 
     chart = _resolved(with_values(diagram, params, curves), problem.network)
-    fit, state = _fit(problem, x, settings, train, more, full, validation)
+    fit, state = _fit(problem, xs, settings, train, more, full, validation)
     disc = discretization(diagram, problem.network)
     if status == "diverged_at_start":
         disc["floor"] = {"rms": None, "skipped": "the fit diverged at its start"}
@@ -174,7 +180,8 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         problem=problem, x=x, lm=out.lm, online_run=out.online,
         extra={"discretization": disc,
                **({"shooting": _shooting(settings, out.lm)} if settings.shooting != "off" else {}),
-               **({"initial_states": {"validation": state.to_dict()}} if state is not None else {})},
+               **({"initial_states": {"validation": state.to_dict()}} if state is not None else {}),
+               **({"parameters_per_record": per_record} if per_record else {})},
     )
 
 
@@ -297,19 +304,23 @@ def _summary(ms, names, cost: str | None = None) -> MultistartSummary:
 
 def _fit(problem: Problem, x, settings: IdentifySettings, train: Dataset, more: list[Dataset], full: Dataset,
          validation: Dataset | None):
-    """(Fit, the validation record's fitted initial state or None)."""
-    train_m = metrics(problem.compiled, x, train, settings.alignment)
+    """(Fit, the validation record's fitted initial state or None). `x` holds each training record's own
+    values of the per-record parameters; a validation record runs with their mean, or with its own values
+    fitted on its initial-state window."""
+    xs, x = x, problem.mean_x(x)
+    train_m = metrics(problem.compiled, problem.record_x(xs, 0), train, settings.alignment)
     if more:
-        per_record = [train_m] + [metrics(problem.compiled, x, d, settings.alignment) for d in more]
-        train_m = combined_metrics(per_record, problem, x, [train] + more, settings.alignment)
+        per_record = [train_m] + [metrics(problem.compiled, problem.record_x(xs, k), d, settings.alignment)
+                                  for k, d in enumerate(more, start=1)]
+        train_m = combined_metrics(per_record, problem, xs, [train] + more, settings.alignment)
     val = None
     if settings.split is not None:
         val = metrics(problem.compiled, x, full, settings.alignment, score_from=train.n_rows)
         val["note"] = "free run over the whole record, scored after the split"
     elif validation is not None and settings.init_window:
         state = estimate_initial_state(problem.compiled, x, validation, settings.alignment, settings.init_window,
-                                       data_init(problem.network, validation))
-        val = metrics(problem.compiled, x, validation, settings.alignment, score_from=settings.init_window,
+                                       data_init(problem.network, validation), params=problem.record_params)
+        val = metrics(problem.compiled, state.theta, validation, settings.alignment, score_from=settings.init_window,
                       history=state.history)
         val["note"] = (f"free run from the initial state fitted on the first {settings.init_window} samples, "
                        f"scored from row {settings.init_window}")

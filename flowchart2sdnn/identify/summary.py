@@ -25,6 +25,17 @@ def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str
     if rows:
         out.append("")
         out.append(table(["parameter", "initial", "identified", "95 % interval", "unit", ""], rows).rstrip())
+    per = result.extra.get("parameters_per_record") or {}
+    if per:  # one value per training record; the table above shows their mean
+        rows = [[name, i + 1, r["record"], _g(r["value"]),
+                 f"[{_g(r['ci95'][0])}, {_g(r['ci95'][1])}]" if r.get("ci95") else "", result.parameters[name].unit or ""]
+                for name, records in per.items() for i, r in enumerate(records)]
+        out.append("")
+        out.append("per-record parameters (the table above gives their mean):")
+        out.append(table(["parameter", "record", "file", "identified", "95 % interval", "unit"], rows).rstrip())
+        state = (result.extra.get("initial_states") or {}).get("validation") or {}
+        for name, v in (state.get("parameters") or {}).items():
+            out.append(f"validation record: {name} = {_g(v)} (fitted on its first {state.get('window')} samples)")
     if result.curves:
         out.append("")
         for block, w in result.curves.items():

@@ -96,10 +96,10 @@ def problem_of(task: FitTask):
             return problem
     network = Network.from_json(task.network_json)
     compiled = CompiledNetwork(network)
-    if tuple(compiled.names) != task.names:
-        raise RuntimeError(f"the rebuilt network fits {compiled.names}, the task expects {task.names}")
     # the chart itself is not needed to run LM; the worker never sees it
     problem = Problem(diagram=None, network=network, compiled=compiled, **task.problem)
+    if tuple(problem.names) != task.names:
+        raise RuntimeError(f"the rebuilt network fits {problem.names}, the task expects {task.names}")
     with _cache_lock:
         _cache[task.key] = problem
         while len(_cache) > _CACHE_SIZE:
