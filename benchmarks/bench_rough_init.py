@@ -24,6 +24,11 @@ shared 2-core machine). Measured (seed 1; more in docs/rough_init.md):
 | coulomb, 10 s, N = 3 | 2/3, 167-668 iterations | 3/3, 22-27 | 3/3, 14-24 evaluations |
 | coulomb, 30 s, N = 8 | — | 8/8, median 44, 10.0 s | 8/8, median 21, 2.8 s |
 | learned, 10 s, N = 4 (vs best truth start) | 0/4, 3 of 4 at the 1000 limit | 1/4, 258-337 | 0/4, 116-1000 |
+
+``--shooting L`` adds our default LM with multiple shooting (identify.shooting). learned, 10 s, N = 4, seed 1,
+``--shooting 250`` (stages 250/1000/4000, then single shooting): 0/4 against 1/4 single shooting (costs 1.35-13.2
+against 1.27-1.46; one final stage at the 1000 limit), median 23.7 s against 6.6 s: the learned chart's local
+minima (d traded against the learned curves' slopes) are not the long-horizon kind that shooting removes.
 """
 
 from __future__ import annotations
@@ -88,14 +93,15 @@ def truth_chart(chart, truth: dict):
         dataclasses.replace(p, init=truth[p.name], fixed=p.fixed or p.name == "J1") for p in chart.parameters))
 
 
-def fit_ours(chart, data, variant: dict, seed: int):
+def fit_ours(chart, data, variant: dict, seed: int, shooting: int = 0):
     problem = build_problem(chart, data, seed=seed)
     x0 = problem.compiled.theta0()
     lo, hi = problem.bounds()
     opts = dataclasses.replace(lm_options(IdentifySettings(seed=seed), problem), **variant)
     t0 = time.perf_counter()
-    r = run_start(problem, x0, lo, hi, opts)
-    return problem, r.x, r.cost, time.perf_counter() - t0, r.iterations, r.status
+    r = run_start(problem, x0, lo, hi, opts, shooting=shooting)
+    iterations = r.iterations + sum(s["iterations"] for s in r.stages[:-1])  # every stage's (multiple shooting)
+    return problem, r.x, r.cost, time.perf_counter() - t0, iterations, r.status
 
 
 def fit_trf(chart, data, seed: int):
@@ -132,6 +138,8 @@ def main() -> None:
     ap.add_argument("--seed", type=int, default=1, help="seed of the bench record and of the rough draws")
     ap.add_argument("--variant", action="append", choices=sorted(VARIANTS), help="our LM variants (default: default)")
     ap.add_argument("--no-trf", action="store_true")
+    ap.add_argument("--shooting", type=int, action="append", default=[],
+                    help="also our default LM with multiple shooting, segments of this many samples (repeatable)")
     args = ap.parse_args()
     variants = args.variant or ["default"]
     chart_name, plant_name = CHARTS[args.chart]
@@ -142,6 +150,7 @@ def main() -> None:
     print(f"# {args.chart}: {chart_name}.yaml on {plant_name}.yaml, {args.seconds:g} s, seed {args.seed}, "
           f"noise 0.01, N = {args.n}, factor ×/÷{FACTOR:g}")
     runs: dict[str, list] = {v: [] for v in variants}
+    runs.update({f"shoot-{n}": [] for n in args.shooting})
     if not args.no_trf:
         runs["trf"] = []
     ref = []
@@ -152,13 +161,17 @@ def main() -> None:
     for i in range(args.n):
         rough = rough_chart(chart, truth, np.random.default_rng([args.seed, i]))
         for name in runs:  # interleaved: every method on draw i before draw i + 1 (fair under shared load)
-            out = fit_trf(rough, data, args.seed) if name == "trf" else fit_ours(rough, data, VARIANTS[name],
-                                                                                  args.seed)
+            if name == "trf":
+                out = fit_trf(rough, data, args.seed)
+            elif name.startswith("shoot-"):
+                out = fit_ours(rough, data, VARIANTS["default"], args.seed, int(name[6:]))
+            else:
+                out = fit_ours(rough, data, VARIANTS[name], args.seed)
             problem, x, cost, secs, evals, status = out
             values = dict(zip(problem.names, x, strict=True))
             runs[name].append((cost, secs, evals, status, values))
             errs = " ".join(f"{k} {100 * (values[k] / truth[k] - 1):+.1f}%" for k in values if k in truth)
-            print(f"draw {i} {name:9s} cost {cost:10.4g} {secs:6.1f} s {evals:4d} it/ev {status:18s} {errs}",
+            print(f"draw {i} {name:10s} cost {cost:10.4g} {secs:6.1f} s {evals:4d} it/ev {status:18s} {errs}",
                   flush=True)
     best = min([*ref] + [r[0] for rs in runs.values() for r in rs])
     print(f"\nreference cost {best:.6g} (truth starts: {', '.join(f'{c:.6g}' for c in ref)})\n")

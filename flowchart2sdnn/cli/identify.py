@@ -31,6 +31,19 @@ from .terminal import CtrlC, Progress
 __all__ = ["identify"]
 
 
+def _shooting(value: str):
+    """--shooting: 'off' or a whole number of samples >= 2 (a bad value exits 2 with one line)."""
+    if value == "off":
+        return value
+    try:
+        length = int(value)
+    except ValueError:
+        length = 0
+    if length < 2:
+        raise click.BadParameter(f"expected 'off' or a segment length of at least 2 samples, got {value!r}")
+    return length
+
+
 @click.command(name="identify")
 @click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--diagram", "chart", required=True, type=click.Path(dir_okay=False), help="The chart (YAML).")
@@ -42,6 +55,10 @@ __all__ = ["identify"]
 @click.option("--init-window", type=click.IntRange(min=1), default=None,
               help="Set the validation record's initial state from its first N samples (parameters fixed), then "
                    "run free; scored from row N (EMPS: 20, CED: 4, Cascaded Tanks: 5).")
+@click.option("--shooting", default="off", show_default=True, callback=lambda ctx, param, v: _shooting(v),
+              help="Multiple shooting: 'off', or L: the records cut into segments of L samples (unmeasured "
+                   "integrator states free at each segment start), merged x4 per stage until single shooting "
+                   "over whole records, whose fit is the result.")
 @click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
               help="Train on this leading fraction of DATA, validate on the rest.")
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
@@ -66,7 +83,7 @@ __all__ = ["identify"]
 @click.option("--quiet", is_flag=True, help="No progress and no table.")
 @executor_options("the multi-start fits")
 @handle_errors
-def identify(data, chart, output, fix_from, validation, init_window, split, starts, seed, online, window, average,
+def identify(data, chart, output, fix_from, validation, init_window, shooting, split, starts, seed, online, window, average,
              max_iter, alignment, substeps, mapping, units, plots, html_path, force, quiet, workers=None,
              scheduler=None) -> None:
     """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
@@ -106,7 +123,7 @@ def identify(data, chart, output, fix_from, validation, init_window, split, star
     with settings_usage():
         settings = IdentifySettings(starts=starts, seed=seed, max_iter=max_iter, alignment=alignment, split=split,
                                     online=online, window=window, average=average, fixed_from=tuple(fixed),
-                                    init_window=init_window or 0)
+                                    init_window=init_window or 0, shooting=shooting)
     progress = Progress(quiet)
     ctrl_c = CtrlC()  # until the files are written: restored when the click context closes
     click.get_current_context().call_on_close(ctrl_c.restore)

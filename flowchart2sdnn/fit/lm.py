@@ -147,6 +147,8 @@ class LMResult:
                                 caller can start the next window from it
     rejected_cost, rejected_diverged, rejected_guard : int   trial steps rejected, by reason
     last_guard_reason : str or None                          the guard's last refusal
+    stages : tuple of dict      earlier stages of a staged fit whose last stage this is (multiple shooting,
+                                identify.shooting), each a summary; () for a plain fit
     """
 
     x: np.ndarray
@@ -167,6 +169,7 @@ class LMResult:
     rejected_diverged: int = 0
     rejected_guard: int = 0
     last_guard_reason: str | None = None
+    stages: tuple = ()
 
     @property
     def converged(self) -> bool:

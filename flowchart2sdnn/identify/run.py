@@ -179,6 +179,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         online=_online_trace(out.online, problem.names, settings) if out.online is not None else None,
         problem=problem, x=x, lm=out.lm, online_run=out.online,
         extra={"discretization": disc,
+               **({"shooting": _shooting(settings, out.lm)} if settings.shooting != "off" else {}),
                **({"initial_states": {"validation": state.to_dict()}} if state is not None else {}),
                **({"parameters_per_record": per_record} if per_record else {})},
     )
@@ -189,6 +190,13 @@ def discretization(diagram, network) -> dict:
     `floor`, the network against the continuous chart: :mod:`flowchart2sdnn.identify.floor`)."""
     return {"substeps": network.substeps, "requested": diagram.substeps, "sample_time": network.sample_time,
             "step": network.step, "delays": diagram.delays or "search"}
+
+
+def _shooting(settings: IdentifySettings, lm: LMResult | None) -> dict:
+    """RESULT.json's `shooting`: the segment length asked for and the best start's stages (identify.shooting)."""
+    return {"length": settings.shooting, "stages": [dict(s) for s in lm.stages] if lm is not None else [],
+            "method": "multiple shooting, segments merged x4, continuity weight x10 per stage, then single "
+                      "shooting over whole records (the result)"}
 
 
 def _resolved(chart, network):
@@ -212,6 +220,7 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
 
 def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, progress, stop, executor) -> _Outcome:
     options = lm_options(settings, problem)
+    shooting = 0 if settings.shooting == "off" else settings.shooting
     starts = draw_starts(problem.names, x0, lower, upper, settings.starts, settings.seed,
                          ranges=settings.ranges or None)
     if executor is None:  # in this process: progress and Ctrl-C after every LM iteration
@@ -222,9 +231,9 @@ def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, pro
             return bool(stop and stop())
 
         fit_one = functools.partial(run_start, problem, lower=lower, upper=upper, options=options,
-                                    callback=callback)
+                                    callback=callback, shooting=shooting)
     else:
-        fit_one = functools.partial(fit_start, fit_task(problem, lower, upper, options))
+        fit_one = functools.partial(fit_start, fit_task(problem, lower, upper, options, shooting))
 
     def start_done(i, result):
         if progress and settings.starts > 1:

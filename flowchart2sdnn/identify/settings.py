@@ -66,6 +66,9 @@ class IdentifySettings:
                              (see :data:`CONVERGED_DECREASE`); 0 runs to ``max_iter``
     init_window : int        > 0: the validation record's initial state is fitted on its first init_window
                              samples (parameters fixed), the free run scored from that row on (identify.initstate)
+    shooting : "off" or int  an int L >= 2: multiple shooting first, segments of L samples merged (x4) until single
+                             shooting over whole records, whose fit is the result (identify.shooting); "off": single
+                             shooting only
     """
 
     starts: int = 1
@@ -84,6 +87,7 @@ class IdentifySettings:
     lm_scale: str = IDENTIFY_SCALE
     converged_decrease: float = CONVERGED_DECREASE
     init_window: int = 0
+    shooting: str | int = "off"
 
     def __post_init__(self):
         _need(self.starts >= 1, f"starts must be at least 1, got {self.starts}")
@@ -100,5 +104,10 @@ class IdentifySettings:
         _need(not (self.init_window and self.split is not None),
               "init_window applies to a separate validation record, not to split (the validation part of a split "
               "continues the training run's state)")
+        _need(self.shooting == "off" or (isinstance(self.shooting, int) and not isinstance(self.shooting, bool)
+                                          and self.shooting >= 2),
+              f"shooting must be 'off' or a segment length of at least 2 samples, got {self.shooting!r}")
+        _need(not (self.online and self.shooting != "off"),
+              "shooting applies to offline fits, not to the quasi-online window")
         _need(self.lm_scale in ("jac", "none"), f"lm_scale must be 'jac' or 'none', got {self.lm_scale!r}")
         _need(self.lm_tau >= 0 and math.isfinite(self.lm_tau), f"lm_tau must be a finite number >= 0, got {self.lm_tau}")

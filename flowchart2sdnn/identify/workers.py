@@ -25,6 +25,7 @@ from typing import Any
 import numpy as np
 
 from ..fit.lm import LMResult, levenberg_marquardt
+from .shooting import shooting_fit
 
 __all__ = ["FitTask", "fit_task", "problem_of", "run_start", "fit_start", "run_quasi_online_start",
            "quasi_online_start"]
@@ -51,6 +52,7 @@ class FitTask:
     options : LMOptions (fit_start) or OnlineOptions (quasi_online_start)
     key : str               sha256 of the network file and the problem fields: the worker's cache key
                             (bounds and options are not cached, they travel with every unit)
+    shooting : int          multiple-shooting segment length (0: single shooting; identify.shooting)
     """
 
     network_json: str
@@ -60,9 +62,10 @@ class FitTask:
     upper: np.ndarray
     options: Any  # LMOptions or fit.online.OnlineOptions
     key: str
+    shooting: int = 0
 
 
-def fit_task(problem, lower: np.ndarray, upper: np.ndarray, options: Any) -> FitTask:
+def fit_task(problem, lower: np.ndarray, upper: np.ndarray, options: Any, shooting: int = 0) -> FitTask:
     """The work unit of a multi-start fit of ``problem`` (an identify.problem.Problem).
 
     Every field of the Problem but the chart and the compiled network travels as it is, so that the worker's
@@ -73,7 +76,7 @@ def fit_task(problem, lower: np.ndarray, upper: np.ndarray, options: Any) -> Fit
     h = hashlib.sha256(text.encode())
     h.update(pickle.dumps(fields, protocol=pickle.HIGHEST_PROTOCOL))
     return FitTask(text, fields, tuple(problem.names), np.array(lower, dtype=float), np.array(upper, dtype=float),
-                   options, h.hexdigest())
+                   options, h.hexdigest(), shooting)
 
 
 _cache: OrderedDict[str, Any] = OrderedDict()
@@ -105,7 +108,7 @@ def problem_of(task: FitTask):
 
 
 def run_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, options,
-              callback: Callable | None = None) -> LMResult:
+              callback: Callable | None = None, shooting: int = 0) -> LMResult:
     """Levenberg-Marquardt from ``start`` on ``problem``: the one way a start is fitted, serial or in a worker.
 
     Parameters
@@ -116,8 +119,13 @@ def run_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, 
     options : LMOptions
     callback : callable ``callback(iteration, x, cost, mu) -> bool``, optional
         Progress and stop (True stops) after each iteration; only where the caller's process runs the fit.
+    shooting : int
+        > 0: multiple shooting with segments of this many samples first (identify.shooting.shooting_fit).
     """
     own = problem.from_start(start)
+    if shooting:
+        return shooting_fit(own, np.asarray(start, dtype=float), lower, upper, options, shooting,
+                            callback=callback, guard=own.guard)
     return levenberg_marquardt(own.fun, np.asarray(start, dtype=float), problem.names, lower, upper, options,
                                callback=callback, guard=own.guard, residual=own.residual)
 
@@ -134,7 +142,7 @@ def fit_start(task: FitTask, start: np.ndarray) -> LMResult:
     -------
     LMResult
     """
-    return run_start(problem_of(task), start, task.lower, task.upper, task.options)
+    return run_start(problem_of(task), start, task.lower, task.upper, task.options, shooting=task.shooting)
 
 
 def run_quasi_online_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, options,

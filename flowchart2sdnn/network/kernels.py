@@ -129,7 +129,7 @@ def _product_value(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_val, conn_d
 
 @numba.njit(cache=True, inline="always")
 def _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, a_buf,
-                  s_buf, slot_of, dn):
+                  s_buf, slot_of, dn, hist_sens=False):
     """Net input of the product neuron k and its sensitivity (from the sensitivities `s_buf`) into `dn`, by the
     product rule one factor at a time: with P the product so far and dP its derivative, a factor f = w x gives
     d(P f) = dP f + P df, df = w S_src(t - d) + x dw/dtheta. Exact with zero factors (no division). Returns n."""
@@ -149,7 +149,8 @@ def _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_
         f = w * x
         for p in range(dn.shape[0]):
             dn[p] *= f
-        if kind == 0 and t - d >= 0:  # before t = 0 the source is history, whose sensitivity is zero
+        # before t = 0 the source is history, whose sensitivity is zero unless given (hist_sens)
+        if kind == 0 and (t - d >= 0 or hist_sens):
             src_slot = slot_of[d]
             src = conn_src[c]
             nw = n * w
@@ -202,7 +203,7 @@ def simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val
 
 @numba.njit(cache=True, inline="always")
 def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
-              a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2):
+              a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2, hist_sens=False):
     """:func:`simulate_step` and the RTRL recursion of the module docstring: ``S(t)`` into slot ``t % ring``
     of `s_buf` (ring, N, n_pad).
 
@@ -210,6 +211,8 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
     nothing reads the padding lanes. With `with_blk`, a second set of sensitivities `s_blk` follows the same
     recursion (the quasi-online kernel's trial mode restarts it at zero at each block start); otherwise `s_blk`
     and `dn2` are not touched. `slot_of` (ring,) int64, `dn` and `dn2` (n_pad,) float64 are scratch.
+    With `hist_sens` the slots of `s_buf` before t = 0 hold the history's own sensitivities (free initial states:
+    identify.shooting) and are read like any other; otherwise they are skipped as zero (`s_blk` always is).
     """
     ring = a_buf.shape[0]
     slot = _slots(t, ring, slot_of)
@@ -221,7 +224,7 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
     for k in range(transfer.shape[0]):
         if transfer[k] == PRODUCT:  # linear transfer: S = dn
             a_buf[slot, k] = _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr,
-                                           dtheta, dval, a_buf, s_buf, slot_of, s_buf[slot, k])
+                                           dtheta, dval, a_buf, s_buf, slot_of, s_buf[slot, k], hist_sens)
             if with_blk:
                 _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval,
                               a_buf, s_blk, slot_of, s_blk[slot, k])
@@ -235,11 +238,11 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
                 src_slot = ix(slot_of[ix(d)])
                 src = ix(conn_src[ix(c)])
                 x = a_buf[src_slot, src]
-                # before t = 0 the source is history, whose sensitivity is zero
-                if t - d >= 0 and w != 0.0:
+                # before t = 0 the source is history, whose sensitivity is zero unless given (hist_sens)
+                if (t - d >= 0 or hist_sens) and w != 0.0:
                     axpy(dn, w, s_buf[src_slot, src])
-                    if with_blk:
-                        axpy(dn2, w, s_blk[src_slot, src])
+                if with_blk and t - d >= 0 and w != 0.0:
+                    axpy(dn2, w, s_blk[src_slot, src])
             elif kind == 1:
                 x = inputs[ix(max(t - d, 0)), ix(conn_src[ix(c)])]
             else:
@@ -304,12 +307,14 @@ def jacobian_kernel(
     record,
     n_theta,
     stride=1,
+    s_init=None,
 ):
     """Outputs and their exact derivatives by RTRL, kept at every `stride`-th step as in :func:`simulate_kernel`.
 
     Extra arguments beyond :func:`simulate_kernel`: the sparse dw/dtheta of each connection in CSR form --
     entries ``dptr[c]:dptr[c + 1]`` of ``dtheta`` (theta index, int64) and ``dval`` (value, float64) -- and
-    ``n_theta`` = P.
+    ``n_theta`` = P. `s_init` (N, P) float64, optional: d history / d theta, for theta that include initial
+    states (multiple shooting's free segment starts); None: the history does not depend on theta.
 
     Returns
     -------
@@ -327,11 +332,17 @@ def jacobian_kernel(
             a_buf[s, k] = history[k]
     n_pad = padded(n_theta)
     s_buf = np.zeros((ring, n_neurons, n_pad))
+    hist_sens = s_init is not None
+    if s_init is not None:
+        for s in range(ring):
+            for k in range(n_neurons):
+                for p in range(n_theta):
+                    s_buf[s, k, p] = s_init[k, p]
     dn = np.empty(n_pad)
     slot_of = np.empty(ring, dtype=np.int64)
     for t in range(n_steps):
         rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
-                  a_buf, s_buf, s_buf, False, slot_of, dn, dn)
+                  a_buf, s_buf, s_buf, False, slot_of, dn, dn, hist_sens)
         if (t + 1) % stride != 0:
             continue
         slot = ix(t % ring)

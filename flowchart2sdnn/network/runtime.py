@@ -325,7 +325,7 @@ class CompiledNetwork:
         )
 
     def simulate(self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None,
-                 history: np.ndarray | None = None) -> np.ndarray:
+                 history: np.ndarray | None = None, states: np.ndarray | None = None) -> np.ndarray:
         """Network outputs for `inputs`.
 
         Parameters
@@ -337,28 +337,47 @@ class CompiledNetwork:
         history : (n_neurons,) array_like, optional
             Every neuron's output before the first step (replaces the file's initial states and `init`):
             an initial state estimated from data (identify.initstate).
+        states : (S,) int64, optional
+            Neurons whose values follow the outputs' (as in :meth:`jacobian`).
 
         Returns
         -------
-        (Q, n_outputs) ndarray, possibly non-finite when theta makes the network unstable.
+        (Q, n_outputs [+ S]) ndarray, possibly non-finite when theta makes the network unstable.
         """
-        return self._run(theta, inputs, init, self._flat.output_index, history)
+        record = self._flat.output_index
+        if states is not None:
+            record = np.concatenate([record, np.asarray(states, dtype=np.int64)]).astype(np.int64)
+        return self._run(theta, inputs, init, record, history)
 
     def jacobian(
-        self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None
+        self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None,
+        history: np.ndarray | None = None, states: np.ndarray | None = None,
     ) -> tuple[np.ndarray, np.ndarray]:
         """Outputs and their exact derivatives with respect to theta (RTRL).
 
+        `history` (every neuron's value before the first step) replaces the initial states as in
+        :meth:`simulate`. `states` (S,) int64, optional: neurons whose history values are quantities too (free
+        initial states): the derivatives then have P + S columns, the last S with respect to
+        ``history[states]``, and the outputs are followed by those neurons' values (the end state of a
+        multiple-shooting segment and its sensitivities).
+
         Returns
         -------
-        yhat : (Q, n_outputs) ndarray
-        dyhat : (Q, n_outputs, P) ndarray
+        yhat : (Q, n_outputs [+ S]) ndarray
+        dyhat : (Q, n_outputs [+ S], P [+ S]) ndarray
             ``dyhat[t, o, i] = d yhat[t, o] / d theta[i]``.
         """
         u = self._steps(self._check_inputs(inputs))
-        hist = self.initial_history(init)
+        hist = self._history(init, history)
         conn_val, dval = self.connection_values(theta, with_derivatives=True)
         f = self._flat
+        record, n_theta, s_init = f.output_index, self.n_theta, None
+        if states is not None:
+            states = np.asarray(states, dtype=np.int64)
+            record = np.concatenate([f.output_index, states]).astype(np.int64)
+            n_theta = self.n_theta + len(states)
+            s_init = np.zeros((f.n_neurons, n_theta))
+            s_init[states, self.n_theta + np.arange(len(states))] = 1.0
         return jacobian_kernel(
             u,
             f.conn_ptr,
@@ -372,9 +391,10 @@ class CompiledNetwork:
             f.transfer,
             hist,
             f.ring,
-            f.output_index,
-            self.n_theta,
+            record,
+            n_theta,
             self.net.substeps,
+            s_init,
         )
 
     def signals(

@@ -1,0 +1,161 @@
+"""--shooting L: multiple shooting, then single shooting over the whole record (identify.shooting).
+
+Oracles: central finite differences of the multiple-shooting residual (the Jacobian, including the columns of
+the free segment starts that the RTRL kernel differentiates through the history), scipy's least_squares on
+the same residual, and a continuous plant (RK4) whose parameters the fit must find.
+"""
+
+from __future__ import annotations
+
+import json
+from pathlib import Path
+
+import numpy as np
+import pytest
+from click.testing import CliRunner
+from scipy.optimize import least_squares
+
+import flowchart2sdnn as sd
+from flowchart2sdnn.cli import main
+from flowchart2sdnn.compiler import compile_diagram
+from flowchart2sdnn.diagram.validate import load_diagram
+from flowchart2sdnn.errors import SdnnError
+from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
+from flowchart2sdnn.identify.initstate import state_neurons
+from flowchart2sdnn.identify.problem import build_problem
+from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.identify.shooting import Segmented, stage_lengths
+from flowchart2sdnn.network.runtime import CompiledNetwork
+from flowchart2sdnn.simulate.continuous import simulate_continuous
+from flowchart2sdnn.simulate.excitation import aprbs
+
+ROOT = Path(__file__).resolve().parent.parent
+
+COULOMB = ROOT / "diagrams" / "two_mass_coulomb.yaml"
+COULOMB_PLANT = ROOT / "diagrams" / "two_mass_coulomb_plant.yaml"
+LEARNED = ROOT / "diagrams" / "two_mass.yaml"
+LEARNED_PLANT = ROOT / "diagrams" / "two_mass_plant.yaml"
+
+
+def _data(plant_path, q: int, seed: int, outputs, noise: float = 0.0):
+    plant = load_diagram(plant_path)
+    rng = np.random.default_rng(seed)
+    u = aprbs(q, plant.sample_time, rng, (-3.0, 3.0))
+    y = simulate_continuous(plant, u[:, None]) + noise * rng.standard_normal((q, len(plant.output_names)))
+    frame = {"time": np.arange(q) * plant.sample_time, "M1": u}
+    frame.update({n: y[:, i] for i, n in enumerate(plant.output_names)})
+    return sd.dataset_from_frame(frame, time="time", inputs=["M1"], outputs=list(outputs))
+
+
+def _fd(fun, x):
+    cols = []
+    for i in range(len(x)):
+        h = 1e-6 * max(1.0, abs(x[i]))
+        up, down = x.copy(), x.copy()
+        up[i] += h
+        down[i] -= h
+        cols.append((fun(down) - fun(up)) / (2 * h))  # d yhat = -d e
+    return np.column_stack(cols)
+
+
+def test_history_sensitivities_match_finite_differences():
+    c = CompiledNetwork(compile_diagram(load_diagram(COULOMB)).network)
+    states = np.array([k for k, _ in state_neurons(c)], dtype=np.int64)
+    rng = np.random.default_rng(0)
+    u = rng.standard_normal((40, 1))
+    theta = c.theta0()
+    h = c.initial_history(None) + 0.1 * rng.standard_normal(c.flat.n_neurons)
+    y, dy = c.jacobian(theta, u, history=h, states=states)
+    y0, dy0 = c.jacobian(theta, u, history=h)
+    assert np.array_equal(y[:, :2], y0) and np.array_equal(dy[:, :2, :len(theta)], dy0)  # theta part unchanged
+    assert np.array_equal(c.simulate(theta, u, history=h, states=states), y)
+    for j, k in enumerate(states):
+        up, down = h.copy(), h.copy()
+        up[k] += 1e-6
+        down[k] -= 1e-6
+        fd = (c.simulate(theta, u, history=up, states=states) - c.simulate(theta, u, history=down, states=states))
+        np.testing.assert_allclose(dy[:, :, len(theta) + j], fd / 2e-6, atol=1e-7 * np.abs(fd / 2e-6).max())
+
+
+@pytest.mark.parametrize("chart, plant, outputs, free, tol", [
+    (COULOMB, COULOMB_PLANT, ["w1", "w2"], ("dphi",), 1e-6),
+    (LEARNED, LEARNED_PLANT, ["w2"], ("w1", "dphi"), 1e-4),  # steep tanh curves: the differences' own error
+])
+def test_the_combined_jacobian_matches_central_differences(chart, plant, outputs, free, tol):
+    problem = build_problem(load_diagram(chart), _data(plant, 120, 1, outputs))
+    seg = Segmented(problem, 25, 3.0)
+    assert seg.free_names == free and len(seg.pieces) == 5 and seg.n_x == seg.n_theta + 4 * len(free)
+    rng = np.random.default_rng(1)
+    x = seg.start(problem.compiled.theta0() * 1.1)
+    x[seg.n_theta:] += 0.01 * rng.standard_normal(seg.n_x - seg.n_theta)
+    e, J = seg.fun(x)
+    np.testing.assert_array_equal(e, seg.residual(x))
+    assert e.size == 119 * len(outputs) + 4 * len(free)  # zoh: row 0 is the initial state
+
+    Jfd = _fd(seg.residual, x)
+    scale = np.maximum(np.abs(J).max(axis=0), 1e-12)
+    assert (np.abs(J - Jfd).max(axis=0) / scale).max() < tol
+
+
+def test_our_lm_and_scipy_reach_the_same_multiple_shooting_minimum():
+    problem = build_problem(load_diagram(COULOMB), _data(COULOMB_PLANT, 400, 4, ["w1", "w2"], noise=0.01))
+    seg = Segmented(problem, 100, 1.0)
+    x0 = seg.start(problem.compiled.theta0())
+    ours = levenberg_marquardt(seg.fun, x0, seg.names, options=LMOptions(max_iter=300, scale="jac", tau=1e-3,
+                                                                         min_rel_cost_change=1e-12))
+    theirs = least_squares(seg.residual, x0, jac=lambda x: -seg.fun(x)[1], method="trf", x_scale="jac",
+                           xtol=1e-12, ftol=1e-12, gtol=1e-12)
+    assert ours.cost == pytest.approx(theirs.cost, rel=1e-5)
+    np.testing.assert_allclose(ours.x[:seg.n_theta], theirs.x[:seg.n_theta], rtol=1e-3, atol=1e-6)
+
+
+def test_identify_with_shooting_finds_the_plant_and_ends_in_single_shooting():
+    data = _data(COULOMB_PLANT, 1200, 2, ["w1", "w2"], noise=0.0)
+    chart = load_diagram(COULOMB)
+    r = identify(chart, data, shooting=100)
+    stages = r.extra["shooting"]["stages"]
+    assert [s["length"] for s in stages] == [100, 400, 1199] and stages[-1]["free_states"] == 0
+    assert [s["weight"] for s in stages[:-1]] == [1.0, 10.0]
+    # the result is the ordinary simulation error of the whole record at the reported point
+    assert r.fit.train.cost == pytest.approx(stages[-1]["cost"], rel=1e-9)
+    assert r.converged
+    truth = {p.name: p.init for p in load_diagram(COULOMB_PLANT).parameters}
+    for name in ("J2", "c"):
+        assert r.parameters[name].value == pytest.approx(truth[name], rel=0.02)
+    assert "shooting" not in identify(chart, data, max_iter=3).extra  # off by default: no new key
+
+
+def test_stage_lengths():
+    assert stage_lengths(100, 30000) == [100, 400, 1600, 6400, 25600]
+    assert stage_lengths(500, 400) == []  # one segment per record: single shooting only
+
+
+@pytest.mark.parametrize("value", [1, 0, True, "auto", "10", 2.5])
+def test_bad_settings_are_refused(value):
+    with pytest.raises(ValueError, match="shooting must be"):
+        IdentifySettings(shooting=value)
+
+
+def test_too_many_segments_is_one_error():
+    problem = build_problem(load_diagram(COULOMB), _data(COULOMB_PLANT, 600, 1, ["w1", "w2"]))
+    with pytest.raises(SdnnError, match="at most 256"):
+        Segmented(problem, 2, 1.0)
+
+
+def test_cli(tmp_path):
+    data = _data(COULOMB_PLANT, 400, 3, ["w1", "w2"])
+    csv = tmp_path / "d.csv"
+    table = np.column_stack([np.arange(data.n_rows) * load_diagram(COULOMB).sample_time]
+                            + [data.columns[c] for c in ("M1", "w1", "w2")])
+    np.savetxt(csv, table, delimiter=",", header="time,M1,w1,w2", comments="", fmt="%.17g")
+    runner = CliRunner()
+    for bad in (["--shooting", "x"], ["--shooting", "1"], ["--shooting", "50", "--online"]):
+        r = runner.invoke(main, ["identify", str(csv), "--diagram", str(COULOMB), *bad])
+        assert r.exit_code == 2, r.output
+        assert "shooting" in r.output
+    out = tmp_path / "r.json"
+    r = runner.invoke(main, ["identify", str(csv), "--diagram", str(COULOMB), "--shooting", "100", "-o", str(out),
+                             "--quiet"])
+    assert r.exit_code == 0, r.output
+    doc = json.loads(out.read_text())
+    assert doc["shooting"]["length"] == 100 and doc["shooting"]["stages"][-1]["length"] == 399
