@@ -11,7 +11,15 @@ import json
 import click
 
 from ..strictjson import strict_json
-from .options import alignment_option, column_reading, data_options, force_option, handle_errors
+from .options import (
+    alignment_option,
+    column_reading,
+    data_options,
+    force_option,
+    handle_errors,
+    rows_option,
+    windowed,
+)
 
 __all__ = ["compare"]
 
@@ -28,6 +36,7 @@ __all__ = ["compare"]
               help="With a RESULT.json: put its values into this chart instead of the identified chart beside it.")
 @alignment_option("Input alignment (default: the fit's with a RESULT.json, else zoh).", default=None)
 @data_options
+@rows_option()
 @click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text", show_default=True)
 @force_option("Overwrite an existing figure.")
 @handle_errors
@@ -53,7 +62,8 @@ def compare(model, data, horizon, output, chart, alignment, mapping, units, fmt,
     diagram, result = read_model(model, chart)
     alignment = alignment or (result.settings.alignment if result is not None else "zoh")
     maps, scales = column_reading(diagram, mapping, units)
-    records = [(Path(d).name, read_csv(d, required_columns(diagram), maps, diagram.sample_time, scale=scales), 0) for d in data]
+    records = [(Path(d).name, windowed(read_csv(d, required_columns(diagram), maps, diagram.sample_time,
+                                                 scale=scales)), 0) for d in data]
     compiled = CompiledNetwork(compile_diagram(diagram).network)
     comparison = compare_records(compiled, compiled.theta0(), records, alignment, horizon, diagram)
     if output:

@@ -22,9 +22,11 @@ from .options import (
     html_option,
     max_iter_option,
     require_figures,
+    rows_option,
     seed_option,
     settings_usage,
     substeps_option,
+    windowed,
     with_substeps,
 )
 from .terminal import Progress
@@ -95,6 +97,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 @alignment_option()
 @substeps_option()
 @data_options
+@rows_option("each training record")
 @seed_option("Seed for initial curves.")
 @html_option()
 @force_option()
@@ -141,7 +144,7 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     diagram = with_substeps(load_diagram(chart), substeps)
     maps, scales = column_reading(diagram, mapping, units)
     cols = required_columns(diagram)
-    train = [read_csv(d, cols, maps, diagram.sample_time, scale=scales) for d in data]
+    train = [windowed(read_csv(d, cols, maps, diagram.sample_time, scale=scales)) for d in data]
     val = [read_csv(v, cols, maps, diagram.sample_time, scale=scales) for v in validation]
     with settings_usage():
         settings = DiagnoseSettings(rounds=rounds, top=top, refit_iter=refit_iter, max_iter=max_iter,

@@ -21,9 +21,11 @@ from .options import (
     html_option,
     max_iter_option,
     require_figures,
+    rows_option,
     seed_option,
     settings_usage,
     substeps_option,
+    windowed,
     with_substeps,
 )
 from .terminal import CtrlC, Progress
@@ -75,6 +77,7 @@ def _shooting(value: str):
 @alignment_option()
 @substeps_option()
 @data_options
+@rows_option("each training record")
 @click.option("--plots", type=click.Path(file_okay=False),
               help="Directory for the figures (PNG; created if needed, figures of the same name replaced). "
                    "Needs matplotlib: pip install flowchart2sdnn[plots].")
@@ -118,7 +121,7 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
         diagram, fixed = fix_from_result(diagram, fix_from)
     maps, scales = column_reading(diagram, mapping, units)
     cols = required_columns(diagram)
-    train = [read_csv(d, cols, maps, diagram.sample_time, scale=scales) for d in data]
+    train = [windowed(read_csv(d, cols, maps, diagram.sample_time, scale=scales)) for d in data]
     val = read_csv(validation, cols, maps, diagram.sample_time, scale=scales) if validation else None
     with settings_usage():
         settings = IdentifySettings(starts=starts, seed=seed, max_iter=max_iter, alignment=alignment, split=split,

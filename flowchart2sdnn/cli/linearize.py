@@ -12,7 +12,7 @@ import json
 import click
 
 from ..strictjson import strict_json
-from .options import column_reading, data_options, force_option, handle_errors
+from .options import column_reading, data_options, force_option, handle_errors, rows_option, windowed
 
 __all__ = ["linearize"]
 
@@ -37,6 +37,7 @@ def _matrix(name: str, m, rows, cols) -> str:
 @click.option("--diagram", "chart", type=click.Path(dir_okay=False),
               help="With a RESULT.json: put its values into this chart instead of the identified chart beside it.")
 @data_options
+@rows_option()
 @click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text", show_default=True)
 @force_option()
 @handle_errors
@@ -80,7 +81,7 @@ def linearize(model, data, at, kink, control_path, bode, chart, mapping, units, 
         estimates = []
         maps, scales = column_reading(diagram, mapping, units)
         for d in data:
-            ds = read_csv(d, required_columns(diagram), maps, diagram.sample_time, scale=scales)
+            ds = windowed(read_csv(d, required_columns(diagram), maps, diagram.sample_time, scale=scales))
             for o in lin.outputs:
                 for i in lin.inputs:
                     estimates.append(empirical_response(ds.columns[i], ds.columns[o], diagram.sample_time, i, o))

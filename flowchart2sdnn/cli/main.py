@@ -28,9 +28,11 @@ from .options import (
     data_options,
     force_option,
     handle_errors,
+    rows_option,
     seed_option,
     settings_usage,
     substeps_option,
+    windowed,
     with_substeps,
 )
 from .report import report
@@ -119,6 +121,7 @@ def compile_(chart: str, output: str | None, explain: bool, dot: str | None, svg
 @alignment_option()
 @substeps_option()
 @data_options
+@rows_option()
 @force_option("Overwrite an existing output file.")
 @handle_errors
 def simulate(chart, data, output, params, continuous, signals, alignment, substeps, mapping, units, force) -> None:
@@ -138,7 +141,7 @@ def simulate(chart, data, output, params, continuous, signals, alignment, subste
 
         diagram = apply_result_file(diagram, params)
     maps, scales = column_reading(diagram, mapping, units)
-    ds = read_csv(data, simulation_columns(diagram), maps, diagram.sample_time, scale=scales)
+    ds = windowed(read_csv(data, simulation_columns(diagram), maps, diagram.sample_time, scale=scales))
     columns = simulate_chart(diagram, ds, alignment=alignment, continuous=continuous, all_signals=signals == "all")
     if output:
         write_csv(output, columns)

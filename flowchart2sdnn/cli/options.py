@@ -20,7 +20,7 @@ import click
 from ..errors import SdnnError
 
 __all__ = ["fail", "handle_errors", "settings_usage", "executor_options", "force_option", "seed_option",
-           "map_option", "unit_option", "data_options", "column_reading", "alignment_option", "max_iter_option",
+           "map_option", "unit_option", "data_options", "column_reading", "rows_option", "windowed", "alignment_option", "max_iter_option",
            "substeps_option", "with_substeps", "ALIGNMENT_HELP", "html_option", "require_figures"]
 
 ALIGNMENT_HELP = "zoh: input sample k acts on [t_k, t_k+1) (logged data); direct: output k uses input k."
@@ -157,6 +157,48 @@ def column_reading(diagram, mapping, units) -> tuple[dict[str, str], dict[str, f
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="'--unit'") from None
 
+
+
+def _parse_rows(ctx, param, value):
+    """``FROM:TO`` -> a slice of data rows (0-based, TO excluded, either end may be left out), kept in the
+    context for :func:`windowed`; a malformed value is a usage error."""
+    if value is None:
+        ctx.meta["rows"] = None
+        return None
+    parts = value.split(":")
+    try:
+        if len(parts) != 2:
+            raise ValueError
+        start, stop = (int(s) if s.strip() else None for s in parts)
+    except ValueError:
+        raise click.BadParameter(f"{value!r} is not FROM:TO (data row numbers, e.g. 1000:31000 or 5000:)",
+                                 ctx=ctx, param=param) from None
+    if (start is not None and start < 0) or (stop is not None and stop < 0) or \
+            (start is not None and stop is not None and stop - start < 3):
+        raise click.BadParameter(f"{value!r}: rows count from 0 and the window needs at least 3 rows",
+                                 ctx=ctx, param=param)
+    ctx.meta["rows"] = slice(start, stop)
+    return None
+
+
+def rows_option(which: str = "every record"):
+    """``--rows FROM:TO``: use only data rows FROM..TO-1 of `which` (see :func:`windowed`)."""
+    return click.option("--rows", metavar="FROM:TO", callback=_parse_rows, expose_value=False, is_eager=False,
+                        help=f"Use only data rows FROM to TO-1 of {which} (0-based; either end may be left out, "
+                             "e.g. 5000:).")
+
+
+def windowed(data):
+    """`data` (a Dataset) cut to the command line's ``--rows`` window; unchanged without it. A window that
+    leaves fewer than 3 rows of the file is an error naming the file."""
+    rows = click.get_current_context().meta.get("rows")
+    if rows is None:
+        return data
+    part = data.slice(rows.start, rows.stop)
+    if part.n_rows < 3:
+        raise SdnnError.at("DATA005", f"--rows {rows.start or ''}:{rows.stop or ''} leaves {part.n_rows} of the "
+                           f"file's {data.n_rows} rows (at least 3 are needed)", data.path)
+    return part
 
 def alignment_option(help: str | None = ALIGNMENT_HELP, default: str | None = "zoh"):
     """``--alignment zoh|direct`` (default zoh; None: the command chooses, e.g. the fit's); see network.alignment."""
