@@ -107,3 +107,49 @@ def test_a_fragment_may_not_redefine_a_chart_signal(tmp_path):
     (place,) = speeds(ONE)
     with pytest.raises(SdnnError, match="adds Fv, which the chart already has"):
         load_effects_file(path)["bad"].patch(ONE, place, None)
+
+
+def test_user_effects_may_use_the_new_functions_and_the_product_block(tmp_path):
+    """A quadratic drag c*w*|w| (signed_square) and a load-dependent friction mu*F*w (a product block) written
+    as user effects: each patched chart equals the same chart written by hand (the hand chart is the oracle)."""
+    path = tmp_path / "fx.yaml"
+    path.write_text("""sdnn_effects: 1
+effects:
+  drag:
+    attach: speed
+    parameters: {"{name}_c": {init: 0}}
+    blocks:
+      "{name}_q": {type: function, f: signed_square, in: "{at}"}
+      "{name}": {type: gain, in: "{name}_q", k: "{name}_c"}
+    output: "{name}"
+  loaded:
+    attach: speed
+    parameters: {"{name}_mu": {init: 0}}
+    blocks:
+      "{name}": {type: product, in: ["{at}", F], k: "{name}_mu"}
+    output: "{name}"
+""")
+    fx = load_effects_file(path)
+    (place,) = speeds(ONE)
+    u = aprbs_input(2000, seed=2, amplitude=3.0)
+    drag = _set(fx["drag"].patch(ONE, place, None), "drag_v_c", 0.05)
+    loaded = _set(fx["loaded"].patch(ONE, place, None), "loaded_v_mu", 0.02)
+    hand = """
+sdnn: 1
+name: hand
+sample_time: 0.001
+inputs: {F: {}}
+outputs: {v: {}}
+parameters: {m: {init: 2.4}, b: {init: 0.4}}
+blocks:
+  Fsum: {type: sum, in: [F, -Fv, -X]}
+  acc:  {type: gain, in: Fsum, k: 1/m}
+  v:    {type: integrator, in: acc}
+  Fv:   {type: gain, in: v, k: b}
+"""
+    hand_drag = diagram_from_text(hand + "  q: {type: function, f: signed_square, in: v}\n"
+                                         "  X: {type: gain, in: q, k: 0.05}\n")
+    hand_loaded = diagram_from_text(hand + "  X: {type: product, in: [v, F], k: 0.02}\n")
+    np.testing.assert_allclose(simulate(drag, u), simulate(hand_drag, u), atol=1e-12)
+    np.testing.assert_allclose(simulate(loaded, u), simulate(hand_loaded, u), atol=1e-12)
+    assert not np.allclose(simulate(drag, u), simulate(ONE, u))  # the effect acts
