@@ -8,6 +8,7 @@ from __future__ import annotations
 
 import dataclasses
 import json
+import re
 from pathlib import Path
 
 import numpy as np
@@ -68,7 +69,7 @@ def test_floor_at_one_step_warns_and_auto_does_not(bench):
     floor, rms = paper.extra["discretization"]["floor"]["rms"], paper.fit.train.rms
     assert max(floor[n] / rms[n] for n in rms) > FLOOR_WARN
     (warning,) = _floor_warnings(paper)
-    assert "substeps: auto" in warning and "delays: torques" in warning
+    assert re.search(r"`substeps: (\d+)`", warning) and "delays: torques" in warning
     floor, rms = fine.extra["discretization"]["floor"]["rms"], fine.fit.train.rms
     assert max(floor[n] / rms[n] for n in rms) < FLOOR_WARN
     assert not _floor_warnings(fine)
@@ -152,3 +153,19 @@ def test_floor_never_writes_a_non_finite_number(monkeypatch):
     out = F.measure_floor(None, type("C", (), {"net": type("N", (), {"substeps": 1})(),
                                                "output_names": ("w1", "w2")})(), None, [(None, 0)], "zoh")
     assert out["rms"] is None and "too large" in out["skipped"]
+
+
+def test_the_advised_substeps_remove_the_warning_on_the_bundled_example():
+    """The README's first command warns; following its advice (a concrete N, not `auto`, which reads the modes at
+    the chart's init while the fitted friction curve is far steeper) removes the warning. The oracle is the
+    continuous chart itself, through a second fit."""
+
+
+    root = Path(__file__).resolve().parent.parent
+    chart, data = sd.load_chart(root / "diagrams/engine.yaml"), sd.read_csv(root / "examples/data/engine_idle.csv")
+    first = sd.identify(chart, data)
+    (warning,) = [w for w in first.warnings if w.startswith("the discretization floor")]
+    n = int(re.search(r"`substeps: (\d+)`", warning).group(1))
+    again = sd.identify(dataclasses.replace(chart, substeps=n), data)
+    assert not [w for w in again.warnings if w.startswith("the discretization floor")]
+    assert again.to_document()["discretization"]["floor"]["rms"]["w1"] < first.to_document()["discretization"]["floor"]["rms"]["w1"] / (n / 2)

@@ -99,18 +99,23 @@ def floor_warnings(floor: dict, residual_rms, chart: Diagram | None, network) ->
     rms = floor.get("rms")
     if not rms:
         return []
-    over = []
+    over, worst = [], 0.0
     for name, f in rms.items():
         r = residual_rms.get(name)
         if r is None or not math.isfinite(r):
             continue
         if f > FLOOR_WARN * r:
             over.append(f"{name} {f:.3g} ({'inf' if r == 0 else f'{100 * f / r:.0f}'} % of its residual RMS {r:.3g})")
+            worst = max(worst, f / r if r > 0 else math.inf)
     if not over:
         return []
     n = network.substeps
-    advice = ["`substeps: auto` in the chart (or --substeps auto)" if n == 1 else
-              f"more sub-steps than the {n} of this fit (substeps: {2 * n} halves the floor)"]
+    # the schemes are first order: the floor falls about as 1/N; aim at half the warning level, a power of two
+    # (`auto` is no answer here: it reads the modes at the chart's init, and a fit can end far faster, e.g. a
+    # learned friction curve that became steep at zero speed)
+    need = n * worst / (FLOOR_WARN / 2) if math.isfinite(worst) else 2 * n
+    suggest = max(2 * n, 2 ** math.ceil(math.log2(max(need, 1.0))))
+    advice = [f"`substeps: {suggest}` in the chart (or --substeps {suggest}; the floor falls about as 1/N)"]
     if chart is None or chart.delays != "torques":
         advice.append("`delays: torques`")
     return [f"the discretization floor (the network against the continuous chart, identified values, training "
