@@ -21,6 +21,23 @@ def _set(diagram, name, value):
         dataclasses.replace(p, init=value) if p.name == name else p for p in diagram.parameters))
 
 
+def _hand(term: str, blocks: str):
+    """The one-mass chart written by hand with one more torque `term` against the motion and its `blocks`."""
+    return diagram_from_text(f"""
+sdnn: 1
+name: hand
+sample_time: 0.001
+inputs: {{F: {{}}}}
+outputs: {{v: {{}}}}
+parameters: {{m: {{init: 2.4}}, b: {{init: 0.4}}}}
+blocks:
+  Fsum: {{type: sum, in: [F, -Fv, -{term}]}}
+  acc:  {{type: gain, in: Fsum, k: 1/m}}
+  v:    {{type: integrator, in: acc}}
+  Fv:   {{type: gain, in: v, k: b}}
+""" + blocks)
+
+
 @pytest.fixture(scope="module")
 def effects():
     return load_effects_file(DATA / "user_effects.yaml")
@@ -40,21 +57,8 @@ def test_a_speed_effect_is_neutral_and_with_a_value_equals_a_hand_written_chart(
     assert ONE.block("Fsum").inputs == chart("one_mass").block("Fsum").inputs  # input chart untouched
     u = aprbs_input(2000, seed=1, amplitude=3.0)
     np.testing.assert_allclose(simulate(patched, u), simulate(ONE, u), atol=1e-12)
-    hand = diagram_from_text("""
-sdnn: 1
-name: hand
-sample_time: 0.001
-inputs: {F: {}}
-outputs: {v: {}}
-parameters: {m: {init: 2.4}, b: {init: 0.4}}
-blocks:
-  Fsum: {type: sum, in: [F, -Fv, -ST]}
-  acc:  {type: gain, in: Fsum, k: 1/m}
-  v:    {type: integrator, in: acc}
-  Fv:   {type: gain, in: v, k: b}
-  s:    {type: function, f: sign_smooth, in: v, eps: 0.2}
-  ST:   {type: gain, in: s, k: 0.3}
-""")
+    hand = _hand("ST", "  s:    {type: function, f: sign_smooth, in: v, eps: 0.2}\n"
+                       "  ST:   {type: gain, in: s, k: 0.3}\n")
     np.testing.assert_allclose(simulate(_set(patched, "stiction_v_F", 0.3), u), simulate(hand, u), atol=1e-12)
 
 
@@ -134,22 +138,8 @@ effects:
     u = aprbs_input(2000, seed=2, amplitude=3.0)
     drag = _set(fx["drag"].patch(ONE, place, None), "drag_v_c", 0.05)
     loaded = _set(fx["loaded"].patch(ONE, place, None), "loaded_v_mu", 0.02)
-    hand = """
-sdnn: 1
-name: hand
-sample_time: 0.001
-inputs: {F: {}}
-outputs: {v: {}}
-parameters: {m: {init: 2.4}, b: {init: 0.4}}
-blocks:
-  Fsum: {type: sum, in: [F, -Fv, -X]}
-  acc:  {type: gain, in: Fsum, k: 1/m}
-  v:    {type: integrator, in: acc}
-  Fv:   {type: gain, in: v, k: b}
-"""
-    hand_drag = diagram_from_text(hand + "  q: {type: function, f: signed_square, in: v}\n"
-                                         "  X: {type: gain, in: q, k: 0.05}\n")
-    hand_loaded = diagram_from_text(hand + "  X: {type: product, in: [v, F], k: 0.02}\n")
+    hand_drag = _hand("X", "  q: {type: function, f: signed_square, in: v}\n  X: {type: gain, in: q, k: 0.05}\n")
+    hand_loaded = _hand("X", "  X: {type: product, in: [v, F], k: 0.02}\n")
     np.testing.assert_allclose(simulate(drag, u), simulate(hand_drag, u), atol=1e-12)
     np.testing.assert_allclose(simulate(loaded, u), simulate(hand_loaded, u), atol=1e-12)
     assert not np.allclose(simulate(drag, u), simulate(ONE, u))  # the effect acts

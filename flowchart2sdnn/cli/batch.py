@@ -1,7 +1,6 @@
 """`sdnn batch`: identify one chart on a fleet of data files, resumably (the click layer over batch.run).
 
-Layer rule: :mod:`flowchart2sdnn.cli` is the top layer, the only place that knows click, exit codes and
-terminal output; library modules never import it.
+Layer: cli (the rule is in the package docstring).
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
 """`sdnn identify`: the click layer over identify.run (formatting lives in identify.summary).
 
-Layer rule: :mod:`flowchart2sdnn.cli` is the top layer, the only place that knows click, exit codes and
-terminal output; library modules never import it.
+Layer: cli (the rule is in the package docstring).
 """
 
 from __future__ import annotations

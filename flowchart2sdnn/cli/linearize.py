@@ -1,8 +1,7 @@
 """`sdnn linearize`: the continuous state-space model of an identified chart, its poles, a python-control file
 and a Bode figure over the frequency response measured in data.
 
-Layer rule: :mod:`flowchart2sdnn.cli` is the top layer, the only place that knows click, exit codes and
-terminal output; library modules never import it.
+Layer: cli (the rule is in the package docstring).
 """
 
 from __future__ import annotations

@@ -1,7 +1,6 @@
 """The `sdnn` group, its small commands (lint, compile, simulate, excite) and the registration of every command.
 
-Layer rule: :mod:`flowchart2sdnn.cli` is the top layer, the only place that knows click, exit codes and
-terminal output; library modules never import it. A command parses its flags, calls library functions and
+Layer: cli (the rule is in the package docstring). A command parses its flags, calls library functions and
 formats their answers, nothing more.
 
 Each command imports the library it needs inside its body: `sdnn --help` and `sdnn lint` should not pay for

@@ -1,8 +1,7 @@
 """What every `sdnn` command shares: its options (each declared once, here), its error handling, and the
 mapping of library settings errors to usage errors.
 
-Layer rule: :mod:`flowchart2sdnn.cli` is the top layer, the only place that knows click, exit codes and
-terminal output; library modules never import it.
+Layer: cli (the rule is in the package docstring).
 
 Exit codes: 0 success, 1 a user error (bad chart, bad data, failed run; one line on stderr), 2 bad usage.
 """

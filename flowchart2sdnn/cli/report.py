@@ -1,8 +1,7 @@
 """`sdnn report`: each parameter of a batch results table over time per drive, and the drifting drives (the
 click layer over batch.drift).
 
-Layer rule: :mod:`flowchart2sdnn.cli` is the top layer, the only place that knows click, exit codes and
-terminal output; library modules never import it.
+Layer: cli (the rule is in the package docstring).
 """
 
 from __future__ import annotations

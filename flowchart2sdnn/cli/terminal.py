@@ -1,7 +1,6 @@
 """Terminal concerns of the `sdnn` commands: progress on stderr and Ctrl-C.
 
-Layer rule: :mod:`flowchart2sdnn.cli` is the top layer, the only place that knows click, exit codes and
-terminal output; library modules never import it. They report progress through plain callables
+Layer: cli (the rule is in the package docstring). They report progress through plain callables
 (``progress(text, fraction)``, ``on_file(done, total, row)``) and poll ``stop()``; the classes here are such
 callables.
 """

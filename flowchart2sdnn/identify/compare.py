@@ -32,7 +32,7 @@ from ..network.alignment import fitted_rows, history_outputs, network_inputs, ru
 from ..network.kernels import simulate_kernel
 from ..network.runtime import CompiledNetwork
 from ..strictjson import finite_or_none
-from .problem import data_init, network_input_names
+from .problem import columns_of, data_init, network_input_names
 
 __all__ = ["RecordComparison", "Comparison", "predict", "compare_records", "signal_units"]
 
@@ -88,13 +88,13 @@ def predict(compiled: CompiledNetwork, theta: np.ndarray, data: Dataset, alignme
                                 or horizon < 1):
         raise ValueError(f"horizon must be a whole number of samples >= 1, not {horizon!r}")
     net = compiled.net
-    u = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in network_input_names(net)])
+    u = columns_of(data, network_input_names(net))
     init = data_init(net, data)
     p = network_inputs(u, alignment)
     if horizon is None or horizon >= len(p):
         with np.errstate(all="ignore"):
             return run_aligned(compiled, theta, u, alignment, init)
-    y = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in compiled.output_names])
+    y = columns_of(data, compiled.output_names)
     flat = compiled.flat
     with np.errstate(all="ignore"):
         conn, _ = compiled.connection_values(theta)

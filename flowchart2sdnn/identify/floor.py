@@ -47,11 +47,11 @@ def _oracle_init(chart: Diagram, data: Dataset) -> dict[str, float]:
 def _one(chart: Diagram, compiled, x, data: Dataset, alignment: str, score_from: int, steps: int) -> np.ndarray:
     """Network minus oracle on one record's scored rows, (rows, n_outputs) in the network's output order."""
     from ..simulate.continuous import simulate_continuous
-    from .problem import data_init, network_input_names
+    from .problem import columns_of, data_init, network_input_names
 
-    u_net = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in network_input_names(compiled.net)])
+    u_net = columns_of(data, network_input_names(compiled.net))
     y_net = run_aligned(compiled, x, u_net, alignment, data_init(compiled.net, data))
-    u = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in chart.input_names])
+    u = columns_of(data, chart.input_names)
     if alignment == "zoh":  # row k of both is the chart at t_k, input k held over [t_k, t_k+1)
         y_or = simulate_continuous(chart, u, init=_oracle_init(chart, data), substeps=steps)
     else:  # direct: the network's row k has seen input k for one sample, the oracle's row k + 1

@@ -30,6 +30,7 @@ from ..fit.lm import LMOptions, levenberg_marquardt
 from ..fit.uncertainty import covariance
 from ..network.alignment import run_aligned
 from ..network.flat import KIND_NEURON, signal_names
+from .problem import columns_of
 
 __all__ = ["InitialStateFit", "state_neurons", "estimate_initial_state", "FD_STEP"]
 
@@ -90,10 +91,6 @@ def state_neurons(compiled) -> list[tuple[int, str]]:
     return out
 
 
-def _columns(data: Dataset, names) -> np.ndarray:
-    return np.column_stack([np.asarray(data.columns[n], dtype=float) for n in names])
-
-
 def estimate_initial_state(compiled, theta, data: Dataset, alignment: str, window: int,
                            init=None, params=()) -> InitialStateFit:
     """Fit the integrators' initial values of `data` on its first `window` rows with `theta` fixed.
@@ -108,8 +105,8 @@ def estimate_initial_state(compiled, theta, data: Dataset, alignment: str, windo
                            hint="give a smaller --init-window")
     theta = np.asarray(theta, dtype=float)
     states = state_neurons(compiled)
-    u = _columns(data, compiled.input_names)[:window]
-    y = _columns(data, compiled.output_names)[:window]
+    u = columns_of(data, compiled.input_names)[:window]
+    y = columns_of(data, compiled.output_names)[:window]
     base = compiled.initial_history(init)
     measured = {int(k): i for i, k in enumerate(compiled.flat.output_index)}
     for k, _ in states:

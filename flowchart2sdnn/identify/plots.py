@@ -28,6 +28,7 @@ import numpy as np
 
 from ..errors import SdnnError
 from .canvas import new_figure, save_png
+from .problem import columns_of
 
 __all__ = ["require_matplotlib", "write_plots", "curve_input_range"]
 
@@ -220,7 +221,7 @@ def _plot_curve(outcome, block: str, weights, directory: Path) -> Path:
 
 def _resid_inputs(data, names, rows: int, alignment: str) -> np.ndarray:
     """The inputs acting on the last `rows` rows of `data` (zoh: input k-1 acts on row k)."""
-    u = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in names])
+    u = columns_of(data, names)
     shift = 1 if alignment == "zoh" else 0
     return u[data.n_rows - rows - shift:data.n_rows - shift]
 

@@ -18,7 +18,7 @@ from ..network.runtime import CompiledNetwork
 from ..network.stability import rest_radii
 from ..strictjson import finite_or_none
 
-__all__ = ["Problem", "Segment", "build_problem", "metrics", "combined_metrics", "data_init", "required_columns", "CHATTER_LIMIT"]
+__all__ = ["Problem", "columns_of", "Segment", "build_problem", "metrics", "combined_metrics", "data_init", "required_columns", "CHATTER_LIMIT"]
 
 #: A trial step whose network chatters at rest (see network.stability) by more than this is rejected.
 CHATTER_LIMIT = 1.0 + 1e-9
@@ -211,7 +211,8 @@ class Problem:
         return None
 
 
-def _stack(data: Dataset, names) -> np.ndarray:
+def columns_of(data: Dataset, names) -> np.ndarray:
+    """The record's columns `names` as one (Q, len(names)) float array: the one way a record becomes arrays."""
     return np.column_stack([np.asarray(data.columns[n], dtype=float) for n in names])
 
 
@@ -231,8 +232,8 @@ def build_problem(diagram: Diagram, data: Dataset, alignment: str = "zoh", seed:
 
 def _one_problem(diagram: Diagram, network: Network, compiled: CompiledNetwork, data: Dataset,
                  alignment: str) -> Problem:
-    u = _stack(data, network_input_names(network))
-    y = _stack(data, compiled.output_names)
+    u = columns_of(data, network_input_names(network))
+    y = columns_of(data, compiled.output_names)
     rows = fitted_rows(data.n_rows, alignment)
     p = network_inputs(u, alignment)
     if len(p) < 2:
@@ -266,8 +267,8 @@ def metrics(compiled: CompiledNetwork, x: np.ndarray, data: Dataset, alignment: 
     `history` (every neuron's value before the first step, see identify.initstate) replaces the initial state.
     """
     network = compiled.net
-    u = _stack(data, network_input_names(network))
-    y = _stack(data, compiled.output_names)
+    u = columns_of(data, network_input_names(network))
+    y = columns_of(data, compiled.output_names)
     init = data_init(network, data) if init is None else init
     yhat = run_aligned(compiled, x, u, alignment, init, history=history)
     start = max(score_from, fitted_rows(data.n_rows, alignment).start)
@@ -293,8 +294,8 @@ def combined_metrics(per_record: list[dict], problem: Problem, x: np.ndarray, re
     names = problem.compiled.output_names
     errors, targets = [], []
     for k, d in enumerate(records):
-        u = np.column_stack([np.asarray(d.columns[i.name], dtype=float) for i in problem.network.inputs])
-        y = np.column_stack([np.asarray(d.columns[n], dtype=float) for n in names])
+        u = columns_of(d, network_input_names(problem.network))
+        y = columns_of(d, names)
         rows = fitted_rows(d.n_rows, alignment)
         yhat = run_aligned(problem.compiled, problem.record_x(x, k), u, alignment, data_init(problem.network, d))
         errors.append(y[rows] - yhat[rows])

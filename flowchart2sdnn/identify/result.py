@@ -242,13 +242,10 @@ class Identification:
         alignment : str, optional
             "zoh" or "direct"; default the one of the fit.
         """
-        from ..network.alignment import run_aligned
-        from .problem import data_init, network_input_names
+        from .compare import predict
 
         compiled, x = self._network()
-        net = compiled.net
-        u = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in network_input_names(net)])
-        y = run_aligned(compiled, x, u, alignment or self.settings.alignment, data_init(net, data))
+        y = predict(compiled, x, data, alignment or self.settings.alignment)
         return {name: y[:, i] for i, name in enumerate(compiled.output_names)}
 
     def _network(self):
