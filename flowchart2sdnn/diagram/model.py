@@ -101,7 +101,8 @@ class Block:
     location: Location | None = None
     # gain, constant, function, product: the factor k (an expression of parameters)
     k: Expr | None = None
-    # integrator: initial value (a number, or "data": the first measured sample of this output)
+    # integrator: initial value (a number, "data": the first measured sample of this output, or a parameter's
+    # name: the start is that parameter, fitted like any other; `init: estimate` adds one, diagram.initestimate)
     init: float | str | None = None
     # delay: samples of pure delay
     n: int | None = None

@@ -105,6 +105,10 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
             raise ValueError("give either a validation record or a split, not both")
         train = full.slice(0, max(3, int(round(settings.split * train.n_rows))))
     problem = build_problem(diagram, train, settings.alignment, settings.seed, more=more)
+    if settings.online and problem.compiled.estimates_starts:
+        raise SdnnError.at("FIT004", "quasi-online identification cannot estimate initial states (init: estimate, "
+                           "or init: <parameter>): its window forgets the record's start", diagram.file,
+                           hint="identify offline, or give the integrator a number as init")
     if settings.online and problem.network.substeps > 1:
         # the quasi-online kernel advances its window one network step per sample
         raise SdnnError.at("FIT004", f"quasi-online identification runs one network step per sample, and this "
