@@ -109,3 +109,10 @@ def test_every_training_record_gets_its_own_start():
     per = json.loads(fitted.to_json())["parameters_per_record"]["dphi_0"]
     for r, twist in zip(per, twists, strict=True):
         assert r["value"] == pytest.approx(twist, rel=0.03) and r["ci95"][0] <= twist <= r["ci95"][1]
+
+
+def test_lint_counts_a_parameter_used_as_a_start():
+    from flowchart2sdnn.analysis.lint import lint_diagram
+
+    chart = diagram_from_text(_chart_text("estimate"), "est.yaml")
+    assert not [d for d in lint_diagram(chart) if d.code == "LINT003"]
