@@ -13,7 +13,7 @@ import importlib
 # cli.diagnose to register the command) does not pay for numba and scipy.
 _WHERE = {
     **dict.fromkeys(("BUILTIN_EFFECTS", "Backlash", "Cogging", "Damping", "DeadTime", "DeadZone", "Effect",
-                     "Friction", "Saturation", "Scales", "SensorLimit"), "effects"),
+                     "Friction", "Saturation", "Scales", "SensorLimit", "SensorOffset"), "effects"),
     "Place": "graph",
     **dict.fromkeys(("DiagnoseSettings", "Diagnosis", "Fitted", "diagnose"), "loop"),
     **dict.fromkeys(("Candidate", "Score", "Screen", "gauss_newton_decrease", "screen"), "score"),
@@ -46,6 +46,7 @@ __all__ = [
     "Scales",
     "Score",
     "SensorLimit",
+    "SensorOffset",
     "Screen",
     "YamlEffect",
     "diagnose",
