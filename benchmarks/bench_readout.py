@@ -21,8 +21,9 @@ continuous RK4 oracle (20 steps per sample) as truth. Every number is the RMS er
    mean(phi[k-1], phi[k]) = phi - h/2*dw.
 6. Friction: the Coulomb torque Fc*tanh(20 w) evaluated on each model's speeds against the truth's.
 7. Stability of the extrapolation for a friction slope s on inertia J (roots of the linear recursion).
+8. Bias: noise-free refits started at the truth (every parameter free): how far the floor moves them.
 
-Run from the repository root: `python benchmarks/bench_readout.py [--seconds 20]` (about 2 minutes).
+Run from the repository root: `python benchmarks/bench_readout.py [--seconds 20] [--no-refit]` (a few minutes).
 """
 
 from __future__ import annotations
@@ -44,6 +45,7 @@ sys.path.insert(0, str(ROOT))
 
 from flowchart2sdnn.compiler import compile_diagram  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
+from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt  # noqa: E402
 from flowchart2sdnn.network.alignment import network_inputs  # noqa: E402
 from flowchart2sdnn.network.midstep import extrapolate_speed_torques, speed_structure  # noqa: E402
 from flowchart2sdnn.network.runtime import CompiledNetwork  # noqa: E402
@@ -356,9 +358,39 @@ def stability_line() -> None:
           f"z = {euler:.2f}, AB2 speed torques up to z = {ab2:.2f} (the chatter guard's 2*J/h becomes J/h)")
 
 
+def refit_table(benches, iterations: int = 60) -> None:
+    """Noise-free refits that START AT THE TRUTH: where the fit moves the parameters is the floor's bias."""
+    print("\n## 8. bias: noise-free refits started at the true parameters (every parameter free, LM with "
+          "scale='jac'); error of each parameter in %\n")
+    print("| chart | network | N | residual RMS per output | parameter errors % | CPU s |")
+    print("|---|---|---|---|---|---|")
+    for b in benches:
+        y = b.y()
+        for stage, n in ((False, 1), (False, 8), (True, 1), (True, 2)):
+            c = CompiledNetwork(b.network(n, stage))
+            x0 = c.theta0()
+
+            def fun(x, c=c, y=y, p=b.p):
+                yhat, jac = c.jacobian(x, p)
+                return (y - yhat).ravel(), jac.reshape(-1, jac.shape[-1])
+
+            def residual(x, c=c, y=y, p=b.p):
+                return (y - c.simulate(x, p)).ravel()
+
+            t0 = time.process_time()
+            res = levenberg_marquardt(fun, x0, c.names, np.zeros_like(x0), None,
+                                      LMOptions(max_iter=iterations, scale="jac"), residual=residual)
+            cpu = time.process_time() - t0
+            r = np.sqrt(np.mean(res.residual.reshape(y.shape) ** 2, axis=0))
+            errs = " ".join(f"{name} {100 * (v / t - 1):+.2f}" for name, v, t in zip(c.names, res.x, x0, strict=True))
+            label = "AB2 speed torques" if stage else "sub-steps (baseline)"
+            print(f"| {b.name} | {label} | {n} | {cells(r)} | {errs} | {cpu:.0f} |")
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=20.0)
+    ap.add_argument("--no-refit", action="store_true", help="skip the refits of section 8")
     args = ap.parse_args()
     benches = [load(name, args.seconds) for name in PLANTS]
     print(f"# {args.seconds:g} s, seed 1, noise-free, T = 1 ms, truth: continuous RK4 (20 steps per sample)\n")
@@ -370,6 +402,8 @@ def main() -> None:
     friction_table(benches, base, reads)
     cost_summary(benches, base)
     stability_line()
+    if not args.no_refit:
+        refit_table(benches)
 
 
 if __name__ == "__main__":
