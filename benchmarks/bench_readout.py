@@ -207,6 +207,20 @@ def baseline_and_stage(benches, sizes=(1, 2, 4, 8)) -> dict:
     return found
 
 
+def search_rule(benches, sizes=(1, 2)) -> None:
+    print("\n## 4c. the rewrite on the search rule's network (`delays: search`: only Newton's sums that see every "
+          "integrator through a delay are speed sums)\n")
+    print("| chart | N | search | search + rewrite | extrapolated edges |")
+    print("|---|---|---|---|---|")
+    for b in benches:
+        for n in sizes:
+            net = compile_diagram(dataclasses.replace(b.diagram, delays="search", substeps=n)).network
+            r = [rms(CompiledNetwork(x).simulate(CompiledNetwork(x).theta0(), b.p), b.y())
+                 for x in (net, extrapolate_speed_torques(net))]
+            edges = ", ".join(net.weights[j].origin for j in speed_structure(net).extrapolated)
+            print(f"| {b.name} | {n} | {cells(r[0])} | {cells(r[1])} | {edges} |")
+
+
 def reproduction(benches, sizes=(1, 2, 4, 8)) -> None:
     print("\n## 2. numpy symplectic Euler of the same physics vs the compiled network\n")
     print("| chart | N | numpy RMS per output | network RMS per output | max abs difference | AB2: numpy vs "
@@ -398,6 +412,7 @@ def main() -> None:
     reproduction(benches)
     reads = readout_table(benches)
     numpy_stages(benches)
+    search_rule(benches)
     twist_table(benches)
     friction_table(benches, base, reads)
     cost_summary(benches, base)

@@ -45,6 +45,17 @@ def test_speed_torques_are_friction_and_damping_not_springs():
     assert "dphi" in {net.layers[m].name for m, _ in st.position_dependent}
 
 
+def test_search_rule_twist_is_no_speed_integrator():
+    """`delays: search` delays `w2 -> dw`: dw sees w1 without a delay and feeds the twist, so neither dw nor the
+    twist is taken for a speed sum / speed integrator and no spring edge is extrapolated; only the motor's
+    Newton's sum (which sees every integrator through a delay) is."""
+    d = load_diagram(DIAGRAMS / "two_mass_coulomb_plant.yaml")
+    net = compile_diagram(dataclasses.replace(d, delays="search", substeps=1)).network
+    st = speed_structure(net)
+    assert {net.layers[m].name for m, _ in st.speed_integrators} == {"w1"}
+    assert {net.weights[j].origin for j in st.extrapolated} == {"MR1 -> MB1", "dw -> MD -> MB1"}
+
+
 def test_rewrite_doubles_each_speed_torque_edge_and_keeps_the_rest():
     net = _net("three_mass_plant.yaml", 2)
     out = extrapolate_speed_torques(net)

@@ -12,9 +12,9 @@ is the whole first-order error (benchmarks/bench_readout.py measures it). Extrap
 makes the network second order at the same cost: each such delayed edge (delay 1, weight w) becomes two,
 delay 1 weight 1.5 w and delay 2 weight -0.5 w. The result is a GDNN of the same kind, so RTRL stays exact.
 
-Which edges: decided from the network alone. A *speed sum* is a neuron that feeds an integrator without delay
-and receives edges delayed by one step; that integrator is a *speed integrator*; every other integrator is a
-*position integrator*. A neuron is *position-dependent* when a delay-free path leads to it from a position
+Which edges: decided from the network alone. A *speed sum* is a neuron that feeds an integrator without delay,
+receives edges delayed by one step and is reached from no integrator without a delay; that integrator is a
+*speed integrator*; every other integrator is a *position integrator*. A neuron is *position-dependent* when a delay-free path leads to it from a position
 integrator. The rewrite extrapolates the delay-1 edges into speed sums from neurons that are not
 position-dependent (their values are on time with the speeds); spring torques (position-dependent) keep their
 single delay. A neuron that mixes a spring and a damper (a chart that sums them before Newton's sum) is
@@ -54,22 +54,31 @@ def speed_structure(net: Network) -> SpeedStructure:
     lw = [(j, w) for j, w in enumerate(net.weights) if w.matrix == "LW"]
     integrators = {(m, r) for m, la in enumerate(net.layers) if la.kind == "integrator" for r in range(la.size)}
     delayed_into = {(w.layer, w.row) for _, w in lw if w.delay == 1}
+    # a speed sum sees every integrator only through a delay (Newton's sum under `delays: torques`); the sum
+    # of the search rule's `w2 -> dw` sees w1 without one and feeds the twist: not a speed sum
+    on_integrators = _reached_without_delay(net, lw, integrators)
     speed_sums, speed_ints = set(), set()
     for _, w in lw:
         tgt, src = (w.layer, w.row), (w.source, w.col)
-        if w.delay == 0 and tgt in integrators and src in delayed_into and src not in integrators:
+        if w.delay == 0 and tgt in integrators and src in delayed_into and src not in on_integrators:
             speed_sums.add(src)
             speed_ints.add(tgt)
-    position = set(integrators - speed_ints)
-    for m in range(len(net.layers)):  # delay-free edges go from earlier to later layers: one ordered sweep
-        for _, w in lw:
-            if w.layer == m and w.delay == 0 and (w.source, w.col) in position:
-                position.add((w.layer, w.row))
+    position = _reached_without_delay(net, lw, integrators - speed_ints)
     extrapolated = tuple(
         j for j, w in lw
         if w.delay == 1 and (w.layer, w.row) in speed_sums and (w.source, w.col) not in position
     )
     return SpeedStructure(frozenset(speed_ints), frozenset(speed_sums), frozenset(position), extrapolated)
+
+
+def _reached_without_delay(net: Network, lw, start: set) -> set:
+    """`start` and every neuron a delay-free path leads to from it."""
+    out = set(start)
+    for m in range(len(net.layers)):  # delay-free edges go from earlier to later layers: one ordered sweep
+        for _, w in lw:
+            if w.layer == m and w.delay == 0 and (w.source, w.col) in out:
+                out.add((w.layer, w.row))
+    return out
 
 
 def extrapolate_speed_torques(net: Network) -> Network:
