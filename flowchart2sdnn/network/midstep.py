@@ -14,11 +14,11 @@ delay 1 weight 1.5 w and delay 2 weight -0.5 w. The result is a GDNN of the same
 
 Which edges: decided from the network alone. A *speed sum* is a neuron that feeds an integrator without delay,
 receives edges delayed by one step and is reached from no integrator without a delay; that integrator is a
-*speed integrator*; every other integrator is a *position integrator*. A neuron is *position-dependent* when a delay-free path leads to it from a position
-integrator. The rewrite extrapolates the delay-1 edges into speed sums from neurons that are not
-position-dependent (their values are on time with the speeds); spring torques (position-dependent) keep their
-single delay. A neuron that mixes a spring and a damper (a chart that sums them before Newton's sum) is
-position-dependent and stays first order: write spring and damper as separate gains.
+*speed integrator*; every other integrator is a *position integrator*. A neuron is *position-dependent* when a
+delay-free path leads to it from a position integrator. The rewrite extrapolates the delay-1 edges into speed
+sums from neurons that are not position-dependent (their values are on time with the speeds); spring torques
+(position-dependent) keep their single delay. A neuron that mixes a spring and a damper (a chart that sums them
+before Newton's sum) is position-dependent and stays first order: write spring and damper as separate gains.
 
 Stability: for a friction slope s (N*m*s/rad) on inertia J, explicit Euler is stable for s*h/J < 2, the
 extrapolation only for s*h/J < 1 (the chatter guard's bound 2*J/h becomes J/h).
