@@ -22,8 +22,11 @@ continuous RK4 oracle (20 steps per sample) as truth. Every number is the RMS er
 6. Friction: the Coulomb torque Fc*tanh(20 w) evaluated on each model's speeds against the truth's.
 7. Stability of the extrapolation for a friction slope s on inertia J (roots of the linear recursion).
 8. Bias: noise-free refits started at the truth (every parameter free): how far the floor moves them.
+9. (`--coverage S`) With 0.01 rad/s noise over seeds 1..S, fits from the truth: how often each parameter's 95 %
+   interval covers the truth, for auto sub-steps and the midpoint speed torques at N = 1, 2.
 
-Run from the repository root: `python benchmarks/bench_readout.py [--seconds 20] [--no-refit]` (a few minutes).
+Run from the repository root: `python benchmarks/bench_readout.py [--seconds 20] [--no-refit] [--coverage S]` (3-4 minutes;
+`--coverage 10` adds about 3).
 """
 
 from __future__ import annotations
@@ -46,6 +49,7 @@ sys.path.insert(0, str(ROOT))
 from flowchart2sdnn.compiler import compile_diagram  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt  # noqa: E402
+from flowchart2sdnn.fit.uncertainty import covariance  # noqa: E402
 from flowchart2sdnn.network.alignment import network_inputs  # noqa: E402
 from flowchart2sdnn.network.midstep import extrapolate_speed_torques, speed_structure  # noqa: E402
 from flowchart2sdnn.network.runtime import CompiledNetwork  # noqa: E402
@@ -372,6 +376,54 @@ def stability_line() -> None:
           f"z = {euler:.2f}, AB2 speed torques up to z = {ab2:.2f} (the chatter guard's 2*J/h becomes J/h)")
 
 
+def fit_from(c: CompiledNetwork, p: np.ndarray, y: np.ndarray, iterations: int = 60):
+    """LM (scale='jac', parameters >= 0) from the network's own theta0 on one record."""
+    def fun(x):
+        yhat, jac = c.jacobian(x, p)
+        return (y - yhat).ravel(), jac.reshape(-1, jac.shape[-1])
+
+    def residual(x):
+        return (y - c.simulate(x, p)).ravel()
+
+    x0 = c.theta0()
+    return levenberg_marquardt(fun, x0, c.names, np.zeros_like(x0), None,
+                               LMOptions(max_iter=iterations, scale="jac"), residual=residual)
+
+
+def coverage_table(benches, seeds: int, seconds: float) -> None:
+    """0.01 rad/s noise, seeds 1..S (excitation and noise), fits started at the truth: how often each 95 %
+    interval (fit.uncertainty.covariance) covers the truth."""
+    print(f"\n## 9. coverage: 0.01 rad/s noise, {seconds:g} s, seeds 1..{seeds}, fits from the truth; how often "
+          "each 95 % interval covers the truth\n")
+    print("| chart | network | N | covered / seeds per parameter | mean error % per parameter |")
+    print("|---|---|---|---|---|")
+    for b in benches:
+        configs = [(False, "auto"), (True, 1), (True, 2)]
+        hits = {k: 0 for k in configs}
+        errs: dict = {k: [] for k in configs}
+        nets = {k: b.network(k[1], k[0]) if k[1] != "auto" else
+                compile_diagram(dataclasses.replace(b.diagram, delays="torques", substeps="auto")).network
+                for k in configs}
+        for seed in range(1, seeds + 1):
+            data = excite(b.diagram, ExcitationSettings(seconds=seconds, seed=seed, noise_std=0.01))
+            p = network_inputs(np.column_stack([data[n] for n in b.diagram.input_names]))
+            y = np.column_stack([data[o] for o in b.outputs])[1:]
+            for k in configs:
+                c = CompiledNetwork(nets[k])
+                res = fit_from(c, p, y)
+                cov = covariance(res.jac, res.residual, names=c.names)
+                truth = c.theta0()
+                hits[k] = hits[k] + (np.abs(res.x - truth) <= cov.ci95)
+                errs[k].append(100 * (res.x / truth - 1))
+        for k in configs:
+            c = CompiledNetwork(nets[k])
+            label = "AB2 speed torques" if k[0] else "sub-steps (baseline)"
+            n = nets[k].substeps
+            cover = " ".join(f"{name} {int(h)}" for name, h in zip(c.names, hits[k], strict=True))
+            mean = " ".join(f"{name} {e:+.3f}" for name, e in zip(c.names, np.mean(errs[k], axis=0), strict=True))
+            print(f"| {b.name} | {label} | {n} | {cover} | {mean} |")
+
+
 def refit_table(benches, iterations: int = 60) -> None:
     """Noise-free refits that START AT THE TRUTH: where the fit moves the parameters is the floor's bias."""
     print("\n## 8. bias: noise-free refits started at the true parameters (every parameter free, LM with "
@@ -383,17 +435,8 @@ def refit_table(benches, iterations: int = 60) -> None:
         for stage, n in ((False, 1), (False, 8), (True, 1), (True, 2)):
             c = CompiledNetwork(b.network(n, stage))
             x0 = c.theta0()
-
-            def fun(x, c=c, y=y, p=b.p):
-                yhat, jac = c.jacobian(x, p)
-                return (y - yhat).ravel(), jac.reshape(-1, jac.shape[-1])
-
-            def residual(x, c=c, y=y, p=b.p):
-                return (y - c.simulate(x, p)).ravel()
-
             t0 = time.process_time()
-            res = levenberg_marquardt(fun, x0, c.names, np.zeros_like(x0), None,
-                                      LMOptions(max_iter=iterations, scale="jac"), residual=residual)
+            res = fit_from(c, b.p, y, iterations)
             cpu = time.process_time() - t0
             r = np.sqrt(np.mean(res.residual.reshape(y.shape) ** 2, axis=0))
             errs = " ".join(f"{name} {100 * (v / t - 1):+.2f}" for name, v, t in zip(c.names, res.x, x0, strict=True))
@@ -405,6 +448,8 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=20.0)
     ap.add_argument("--no-refit", action="store_true", help="skip the refits of section 8")
+    ap.add_argument("--coverage", type=int, default=0, metavar="S",
+                    help="section 9: interval coverage over noise seeds 1..S (about 15 s a seed)")
     args = ap.parse_args()
     benches = [load(name, args.seconds) for name in PLANTS]
     print(f"# {args.seconds:g} s, seed 1, noise-free, T = 1 ms, truth: continuous RK4 (20 steps per sample)\n")
@@ -419,6 +464,8 @@ def main() -> None:
     stability_line()
     if not args.no_refit:
         refit_table(benches)
+    if args.coverage:
+        coverage_table(benches, args.coverage, args.seconds)
 
 
 if __name__ == "__main__":
