@@ -111,7 +111,7 @@ def test_the_papers_charts_pin_its_scheme(pinned):
 
 def test_identify_records_the_default_and_dumps_the_fitted_n(tmp_path):
     """RESULT.json: requested null (not given), the auto N used, delays torques; the identified chart names that
-    N, so that it reloads onto the network it was fitted with."""
+    N and that rule, so that it reloads onto the network it was fitted with."""
     import flowchart2sdnn as sd
 
     chart = tmp_path / "msd.yaml"
@@ -125,7 +125,7 @@ def test_identify_records_the_default_and_dumps_the_fitted_n(tmp_path):
     disc = json.loads(result.to_json())["discretization"]
     assert (disc["substeps"], disc["requested"], disc["delays"]) == (n, None, "torques")
     assert disc["step"] == pytest.approx(0.001 / n)
-    assert result.chart.substeps == n and result.chart.delays is None
+    assert result.chart.substeps == n and result.chart.delays == "torques"
     out = tmp_path / "identified.yaml"
     out.write_text(dump_diagram(result.chart))
     again = load_diagram(out)

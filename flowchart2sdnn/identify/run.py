@@ -201,9 +201,12 @@ def _shooting(settings: IdentifySettings, lm: LMResult | None) -> dict:
 
 
 def _resolved(chart, network):
-    """The identified chart with `substeps: auto` (given or by default) replaced by the N that was fitted: auto
-    depends on the parameter values, and the identified values must run on the network they were fitted with."""
-    return replace(chart, substeps=network.substeps) if chart.substeps in (None, "auto") else chart
+    """The identified chart naming the network it was fitted with: `substeps: auto` (given or by default)
+    replaced by the N used (auto depends on the parameter values) and the delay rule written out (a default may
+    change; the identified values belong to this network)."""
+    if chart.substeps in (None, "auto"):
+        chart = replace(chart, substeps=network.substeps)
+    return chart if chart.delays is not None else replace(chart, delays=delay_rule(chart))
 
 
 def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
