@@ -131,3 +131,14 @@ def test_identify_records_the_default_and_dumps_the_fitted_n(tmp_path):
     again = load_diagram(out)
     assert again.substeps == n and compile_diagram(again).network.substeps == n
     assert compile_diagram(again).network.delayed_edges == compile_diagram(d).network.delayed_edges
+
+
+def test_the_api_follows_the_chart_defaults_and_takes_an_override(tmp_path):
+    import flowchart2sdnn as sd
+
+    chart = tmp_path / "msd.yaml"
+    chart.write_text(_msd_text())
+    n = math.ceil(math.sqrt(1250 / 2.0) * 0.001 / AUTO_BOUND - 1e-9)
+    assert sd.compile_chart(chart).network.substeps == n
+    one = sd.compile_chart(chart, substeps=1)
+    assert one.network.substeps == 1 and one.substeps.requested == 1
