@@ -133,6 +133,8 @@ CHART_WITH = """
 sdnn: 1
 name: by_hand
 sample_time: 0.001
+substeps: 1
+delays: search
 inputs: {M1: {}}
 outputs: {w1: {}, w2: {}}
 parameters: {J1: {init: 0.17}, J2: {init: 0.43}, c: {init: 420}, d: {init: 0.3}, b1: {init: 0.04}}

@@ -135,9 +135,10 @@ class Diagram:
     version: int = FORMAT_VERSION
     file: str = "<chart>"
     source_sha256: str | None = None
-    # network steps per sample: an int >= 1, "auto", or None (not given: 1, today's network)
+    # network steps per sample: an int >= 1 (1: the paper's network), "auto", or None (not given: auto, see
+    # compiler.substeps.DEFAULT_SUBSTEPS)
     substeps: int | str | None = None
-    # which feedback edges are delayed: "search" (None: the default) or "torques"
+    # which feedback edges are delayed: "search" or "torques" (None: not given, torques; analysis.loops.delay_rule)
     delays: str | None = None
     extra: dict = field(default_factory=dict, compare=False, hash=False)
 
