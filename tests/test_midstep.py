@@ -166,3 +166,53 @@ def test_friction_stays_stable_only_below_half_the_euler_bound(n):
     assert (stage > 1e-4) if z > 1 else (stage < 1e-9)
     if z < 2:
         assert _settled(net) < 1e-9  # the compiled network itself is stable there
+
+
+def test_the_chart_key_midpoint_compiles_the_rewritten_torques_network():
+    d = load_diagram(DIAGRAMS / "three_mass_plant.yaml")
+    for n in (1, 2):
+        keyed = compile_diagram(dataclasses.replace(d, delays="midpoint", substeps=n)).network
+        by_hand = extrapolate_speed_torques(_net("three_mass_plant.yaml", n))
+        assert keyed.to_dict() == by_hand.to_dict()
+    text = (DIAGRAMS / "three_mass_plant.yaml").read_text().replace("delays: torques", "delays: midpoint")
+    assert diagram_from_text(text, "mid.yaml").delays == "midpoint"
+
+
+SPRING = """\
+sdnn: 1
+name: spring_mass
+sample_time: 0.001
+delays: midpoint
+inputs:
+  M: {}
+outputs:
+  w: {}
+parameters:
+  J: {init: 0.1}
+  c: {init: 1440}
+  b: {init: 10}
+blocks:
+  MB: {type: sum, in: [M, -MC, -MV]}
+  acc: {type: gain, in: MB, k: 1/J}
+  w: {type: integrator, in: acc}
+  phi: {type: integrator, in: w}
+  MC: {type: gain, in: phi, k: c}
+  MV: {type: gain, in: w, k: b}
+"""
+
+
+def test_auto_under_midpoint_reads_the_machines_modes_with_the_second_order_bound():
+    """sqrt(c/J) = 120 rad/s: omega*T = 0.12 asks for N = 3 at the bound 0.05 (12-13 at the first-order 0.01).
+    The viscous slope b h / J = 0.1 gives the extrapolation a parasitic root near -0.05, |log| / h = 3000 rad/s:
+    read from the rewritten network, auto would take the cap."""
+    from flowchart2sdnn.compiler.substeps import AUTO_BOUND, AUTO_BOUND_MIDPOINT, fastest_mode
+
+    comp = compile_diagram(diagram_from_text(SPRING, "spring.yaml"))
+    omega = np.sqrt(1440 / 0.1)
+    assert comp.network.substeps == int(np.ceil(omega * 0.001 / AUTO_BOUND_MIDPOINT)) == 3
+    assert any(w.delay == 2 for w in comp.network.weights)
+    assert fastest_mode(extrapolate_speed_torques(compile_diagram(
+        diagram_from_text(SPRING.replace("delays: midpoint", "delays: torques\nsubsteps: 1"), "s.yaml")).network)) > 2000
+    torques = compile_diagram(diagram_from_text(SPRING.replace("delays: midpoint", "delays: torques"), "s.yaml"))
+    # the first-order bound on the same modes (the discrete mode reads 123 rad/s, not 120: N = 13)
+    assert torques.network.substeps == int(np.ceil(torques.substeps.omega_max * 0.001 / AUTO_BOUND)) >= 12

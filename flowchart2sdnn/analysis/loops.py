@@ -18,6 +18,8 @@ speed sum: there `torques` is `search`). `delays: search` is the search alone. S
 from the new speeds: symplectic Euler for every mass, where the search alone may delay a neighbour's speed
 instead (`w2 -> dw`), which lets a mass feel a shaft torque computed from a one-step-old neighbour and errs
 several times more on a chain of masses. The set is structural, so the choice still ignores the YAML order.
+`delays: midpoint` delays the same edges; the compiler then takes the speed-dependent torques at mid-step
+(network.midstep, second order).
 """
 
 from __future__ import annotations
@@ -118,7 +120,7 @@ def analyse_loops(diagram: Diagram) -> LoopReport:
     g = chart_graph(diagram)
     algebraic = find_algebraic_loops(g)
     full = delay_free_graph(g)
-    candidates = torque_edges(g, full) if delay_rule(diagram) == "torques" else []
+    candidates = torque_edges(g, full) if delay_rule(diagram) in ("torques", "midpoint") else []
     h = full.copy() if candidates else full
     inputs = [s.name for s in diagram.inputs if s.name in g]
     din = distances(full, inputs)

@@ -13,14 +13,15 @@ from dataclasses import dataclass
 from pathlib import Path
 
 from ..analysis.lint import lint_diagram
-from ..analysis.loops import LoopReport, analyse_loops
+from ..analysis.loops import LoopReport, analyse_loops, delay_rule
 from ..diagram.model import Diagram
 from ..diagram.validate import load_diagram
 from ..errors import Diagnostic, Location, SdnnError
+from ..network.midstep import extrapolate_speed_torques
 from ..network.model import Network
 from .discretize import DiscreteChart, discretize
 from .emit import emit_network
-from .substeps import AUTO_CAP, SubstepChoice, choose_substeps
+from .substeps import AUTO_BOUND_MIDPOINT, AUTO_CAP, SubstepChoice, choose_substeps
 
 __all__ = ["Compilation", "compile_diagram", "compile_file"]
 
@@ -71,13 +72,17 @@ def _compile(diagram: Diagram, seed: int, substeps: int | str | None = None) -> 
     loops = analyse_loops(diagram)
     built: dict[int, tuple[DiscreteChart, Network]] = {}
 
-    def build(n: int) -> Network:
+    def emitted(n: int) -> Network:
         if n not in built:
             discrete = discretize(diagram, loops, seed, n)
             built[n] = (discrete, emit_network(diagram, discrete, loops, seed, n))
         return built[n][1]
 
-    choice, network = choose_substeps(diagram, build, substeps)
+    if delay_rule(diagram) == "midpoint":  # the torques rule's delays, then the speed torques at mid-step
+        choice, network = choose_substeps(diagram, lambda n: extrapolate_speed_torques(emitted(n)), substeps,
+                                          probe=emitted, bound=AUTO_BOUND_MIDPOINT)
+    else:
+        choice, network = choose_substeps(diagram, emitted, substeps)
     warnings = [d for d in diagnostics if d.severity != "error"]
     if choice.capped:
         warnings.append(Diagnostic(

@@ -8,6 +8,11 @@ with w_max * T / N <= AUTO_BOUND. The bound is measured, not derived: on the two
 (`benchmarks/bench_substeps.py`, `delays: torques`) w*h <= 0.01 keeps every speed within 0.06 % of its RMS
 (0.0025 rad/s at most on speeds of 3-5 rad/s RMS); 0.02 left the three-mass motor speed at 0.13 %. N is capped at AUTO_CAP; when the cap binds
 (a steep friction curve at zero speed reads as a very fast mode) a warning says so.
+
+`delays: midpoint` is second order (network.midstep): its bound is AUTO_BOUND_MIDPOINT, w*h <= 0.05, which
+gives N = 2 on both benches (floors 0.0007 rad/s and below, under auto's first-order 0.0021 at N = 7-8), and its
+modes are read from the network before the rewrite: the Adams-Bashforth extrapolation adds a parasitic root
+near -0.5 s h / J per friction slope s, not a mode of the machine, that would read as pi / h.
 """
 
 from __future__ import annotations
@@ -21,10 +26,12 @@ from ..diagram.model import Diagram
 from ..network.model import Network
 from ..network.stability import rest_eigenvalues
 
-__all__ = ["AUTO_BOUND", "AUTO_CAP", "DEFAULT_SUBSTEPS", "SubstepChoice", "fastest_mode", "choose_substeps"]
+__all__ = ["AUTO_BOUND", "AUTO_BOUND_MIDPOINT", "AUTO_CAP", "DEFAULT_SUBSTEPS", "SubstepChoice", "fastest_mode", "choose_substeps"]
 
 #: auto keeps omega_max * h at or below this (rad per network step)
 AUTO_BOUND = 0.01
+#: ... and this under `delays: midpoint` (second order: the error falls as h^2)
+AUTO_BOUND_MIDPOINT = 0.05
 #: auto never takes more steps per sample than this
 AUTO_CAP = 32
 #: what a chart without `substeps` (and no --substeps) gets; `substeps: 1` is the paper's network
@@ -42,6 +49,7 @@ class SubstepChoice:
     requested: int | str | None
     omega_max: float | None = None  # rad/s, the fastest mode at rest (auto only)
     capped: bool = False
+    bound: float = AUTO_BOUND  # auto's bound on omega_max * h
 
     def explain(self, sample_time: float) -> str:
         h = sample_time / self.substeps
@@ -49,7 +57,7 @@ class SubstepChoice:
         if (self.requested or DEFAULT_SUBSTEPS) == "auto":
             w = self.omega_max or 0.0
             text += (f", auto{' (the default)' if self.requested is None else ''}: fastest mode at rest {w:.4g} rad/s ({w / (2 * math.pi):.4g} Hz), "
-                     f"omega_max*h = {w * h:.3g} (bound {AUTO_BOUND:g}, cap {AUTO_CAP})")
+                     f"omega_max*h = {w * h:.3g} (bound {self.bound:g}, cap {AUTO_CAP})")
             if self.capped:
                 text += " -- the cap binds"
         return text
@@ -70,11 +78,11 @@ def fastest_mode(net: Network) -> float:
     return float(np.max(np.abs(np.log(z.astype(complex))))) / net.step
 
 
-def substeps_for(omega: float, sample_time: float) -> tuple[int, bool]:
-    """(N, capped): the smallest N with omega * T / N <= AUTO_BOUND, at most AUTO_CAP."""
+def substeps_for(omega: float, sample_time: float, bound: float = AUTO_BOUND) -> tuple[int, bool]:
+    """(N, capped): the smallest N with omega * T / N <= bound, at most AUTO_CAP."""
     if not math.isfinite(omega):
         return AUTO_CAP, True
-    need = max(1, math.ceil(omega * sample_time / AUTO_BOUND - 1e-9))
+    need = max(1, math.ceil(omega * sample_time / bound - 1e-9))
     return min(need, AUTO_CAP), need > AUTO_CAP
 
 
@@ -83,25 +91,23 @@ def requested_substeps(diagram: Diagram, override: int | str | None = None) -> i
     return override if override is not None else diagram.substeps
 
 
-def choose_substeps(diagram: Diagram, build, override: int | str | None = None) -> tuple[SubstepChoice, Network]:
+def choose_substeps(diagram: Diagram, build, override: int | str | None = None, probe=None,
+                    bound: float = AUTO_BOUND) -> tuple[SubstepChoice, Network]:
     """Resolve the sub-steps and return the network compiled with them.
 
-    `build(N)` compiles the chart at N sub-steps. For `auto` the fastest mode is read from the network at one
-    step per sample and again from the network at the chosen N (a coarse step distorts fast modes: implicit
-    Euler slows them), and the larger N of the two is kept.
+    `build(N)` compiles the chart at N sub-steps; `probe(N)` (default: `build`) is the network whose modes
+    `auto` reads, with `bound` on omega_max * h. For `auto` the fastest mode is read at one step per sample and
+    again at the chosen N (a coarse step distorts fast modes: implicit Euler slows them), and the larger N of the
+    two is kept.
     """
+    probe = probe or build
     requested = requested_substeps(diagram, override)
     if (requested or DEFAULT_SUBSTEPS) != "auto":
         n = int(requested or DEFAULT_SUBSTEPS)
-        return SubstepChoice(n, requested), build(n)
-    net = build(1)
-    omega = fastest_mode(net)
-    n, capped = substeps_for(omega, diagram.sample_time)
+        return SubstepChoice(n, requested, bound=bound), build(n)
+    omega = fastest_mode(probe(1))
+    n, capped = substeps_for(omega, diagram.sample_time, bound)
     if n > 1:
-        net = build(n)
-        omega = max(omega, fastest_mode(net))
-        n2, capped = substeps_for(omega, diagram.sample_time)
-        if n2 != n:
-            n = n2
-            net = build(n)
-    return SubstepChoice(n, requested, omega, capped), net
+        omega = max(omega, fastest_mode(probe(n)))
+        n, capped = substeps_for(omega, diagram.sample_time, bound)
+    return SubstepChoice(n, requested, omega, capped, bound), build(n)

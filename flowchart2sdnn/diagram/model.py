@@ -34,7 +34,7 @@ FORMAT_VERSION = 1
 #: `substeps` may name at most this many network steps per sample (auto caps far lower, see compiler.substeps)
 MAX_SUBSTEPS = 1000
 #: `delays`: which feedback edges carry the one-step delay (see analysis.loops)
-DELAY_RULES = ("search", "torques")
+DELAY_RULES = ("search", "torques", "midpoint")
 BLOCK_KINDS = ("sum", "gain", "integrator", "delay", "constant", "nonlinear", "function", "product")
 # sat(z) = clip(z, -1, 1); sqrt is signed and regularised within eps of 0 (see FUNCTION_HELP);
 # square is z^2, signed_square z*|z| (a drag that keeps the sign of the speed)
@@ -138,7 +138,8 @@ class Diagram:
     # network steps per sample: an int >= 1 (1: the paper's network), "auto", or None (not given: auto, see
     # compiler.substeps.DEFAULT_SUBSTEPS)
     substeps: int | str | None = None
-    # which feedback edges are delayed: "search" or "torques" (None: not given, torques; analysis.loops.delay_rule)
+    # which feedback edges are delayed: "search", "torques" or "midpoint" (torques with the speed torques taken at
+    # mid-step, network.midstep) (None: not given, torques; analysis.loops.delay_rule)
     delays: str | None = None
     extra: dict = field(default_factory=dict, compare=False, hash=False)
 

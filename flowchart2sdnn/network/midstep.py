@@ -1,4 +1,5 @@
-"""Second-order speed torques: an opt-in rewrite of a compiled network (issue 13; not used by the compiler).
+"""Second-order speed torques: a rewrite of a compiled network (issue 13), the compiler's last pass under the
+chart key `delays: midpoint`.
 
 With ``delays: torques`` the network is symplectic Euler: a speed integrator adds h/J times its *speed sum*
 (Newton's sum), whose torques arrive one step late. Under a zero-order-hold input that scheme is second order
