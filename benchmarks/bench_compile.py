@@ -2,6 +2,10 @@
 
 Mass i (inertia J_i, friction-free) is coupled to mass i+1 by a spring c_i and a damper d_i, mass 1 is driven by
 the torque M1, the last speed is the output. Run: ``python benchmarks/bench_compile.py [N ...]``.
+
+The passes are timed at one step per sample (`substeps: 1` in the chart): a chart without the key gets
+`substeps: auto`, whose eigenvalue analysis of the network (dense, O(n^3) in the neurons, twice) is timed apart
+in the last column, for chains of up to AUTO_UP_TO masses.
 """
 
 from __future__ import annotations
@@ -19,7 +23,7 @@ __all__ = ["chain_chart"]
 
 def chain_chart(n: int) -> str:
     """YAML text of a chain of `n` coupled masses (n >= 2)."""
-    lines = ["sdnn: 1", f"name: chain{n}", "sample_time: 0.001", "inputs:", "  M1: {unit: N*m}",
+    lines = ["sdnn: 1", f"name: chain{n}", "sample_time: 0.001", "substeps: 1", "inputs:", "  M1: {unit: N*m}",
              "outputs:", f"  w{n}: {{unit: rad/s}}", "parameters:"]
     for i in range(1, n + 1):
         lines.append(f"  J{i}: {{init: 0.2, unit: kg*m^2, min: 0}}")
@@ -42,6 +46,10 @@ def chain_chart(n: int) -> str:
     return "\n".join(lines) + "\n"
 
 
+#: the auto column is measured up to this size (1000 masses: about a minute of CPU)
+AUTO_UP_TO = 300
+
+
 def _best(func, repeat: int) -> tuple[float, float, object]:
     """Best wall and CPU seconds of `repeat` calls (CPU time is the fairer number on a shared machine)."""
     wall = cpu = float("inf")
@@ -55,7 +63,7 @@ def _best(func, repeat: int) -> tuple[float, float, object]:
 
 def main(sizes: list[int]) -> int:
     print(f"{'masses':>7} {'layers':>7} {'compile s':>10} {'(cpu s)':>8} {'file->net s':>12} {'(cpu s)':>8} "
-          f"{'growth':>7}")
+          f"{'growth':>7} {'auto N':>7} {'auto cpu s':>10}")
     previous = None
     cpu_of: dict[int, float] = {}
     with tempfile.TemporaryDirectory() as tmp:
@@ -67,11 +75,17 @@ def main(sizes: list[int]) -> int:
             wall, cpu, comp = _best(lambda d=diagram: compile_diagram(d), repeat)
             fwall, fcpu, _ = _best(lambda p=path: compile_file(p), repeat)
             growth = f"{fcpu / previous:7.1f}" if previous else f"{'':>7}"
-            print(f"{n:>7} {len(comp.network.layers):>7} {wall:>10.3f} {cpu:>8.3f} {fwall:>12.3f} {fcpu:>8.3f} {growth}")
+            auto = ""
+            if n <= AUTO_UP_TO:
+                _, acpu, acomp = _best(lambda d=diagram: compile_diagram(d, substeps="auto"), 1)
+                auto = f" {acomp.network.substeps:>7} {acpu:>10.3f}"
+            print(f"{n:>7} {len(comp.network.layers):>7} {wall:>10.3f} {cpu:>8.3f} {fwall:>12.3f} {fcpu:>8.3f} {growth}"
+                  + auto)
             previous = fcpu
             cpu_of[n] = fcpu
     print("compile: chart IR -> network (lint, loops, discretize, emit); file->net: sdnn compile's work "
-          "(read, validate, compile); growth: CPU time ratio to the previous size")
+          "(read, validate, compile), both at substeps: 1; growth: CPU time ratio to the previous size; auto: "
+          "the same chart at substeps: auto (without the key), the N it chose and its compile CPU time")
     if 1000 in cpu_of:
         ok = cpu_of[1000] < 2.0
         print(f"1000 masses, file -> network: {cpu_of[1000]:.3f} CPU s ({'under' if ok else 'OVER'} the 2 s budget)")

@@ -42,9 +42,14 @@ def load_chart(path: str | Path) -> Diagram:
     return load_diagram(path)
 
 
-def compile_chart(chart: Diagram | str | Path, seed: int = 0) -> Compilation:
-    """Lint, analyse loops, discretize and emit the GDNN; ``.network`` is the compiled network."""
-    return compile_diagram(_chart(chart), seed)
+def compile_chart(chart: Diagram | str | Path, seed: int = 0, substeps: int | str | None = None) -> Compilation:
+    """Lint, analyse loops, discretize and emit the GDNN; ``.network`` is the compiled network.
+
+    `substeps` (N >= 1 or "auto") overrides the chart's, as ``--substeps`` does; a chart without the key gets
+    "auto", and without `delays` the torques rule (``substeps=1`` on a `delays: search` chart is the paper's
+    network). ``.substeps`` says which N was used and why.
+    """
+    return compile_diagram(_chart(chart), seed, substeps)
 
 
 def read_csv(path: str | Path, map: Mapping[str, str] | None = None, chart: Diagram | str | Path | None = None,

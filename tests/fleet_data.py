@@ -9,6 +9,8 @@ sdnn: 1
 name: drive
 description: one-mass drive with Coulomb and viscous friction (fleet tests)
 sample_time: 0.001
+substeps: 1        # the subject is the fleet, not the discretization (auto would take 29 steps a sample)
+delays: search
 inputs:
   M1: {unit: N*m}
 outputs:

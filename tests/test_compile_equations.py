@@ -10,6 +10,7 @@ from the compiler; the networks run with alignment "direct" (network input at st
 
 from __future__ import annotations
 
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -26,7 +27,10 @@ TOL = 1e-12
 
 
 def _compiled(text: str, name: str) -> tuple[CompiledNetwork, float]:
-    net = compile_diagram(diagram_from_text(text, name)).network
+    """The chart at the paper's scheme (one step per sample, the search's delays) unless it names its own."""
+    diagram = diagram_from_text(text, name)
+    diagram = replace(diagram, substeps=diagram.substeps or 1, delays=diagram.delays or "search")
+    net = compile_diagram(diagram).network
     return CompiledNetwork(net), net.sample_time
 
 

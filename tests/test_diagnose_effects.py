@@ -133,6 +133,8 @@ CHART_WITH = """
 sdnn: 1
 name: by_hand
 sample_time: 0.001
+substeps: 1
+delays: search
 inputs: {M1: {}}
 outputs: {w1: {}, w2: {}}
 parameters: {J1: {init: 0.17}, J2: {init: 0.43}, c: {init: 420}, d: {init: 0.3}, b1: {init: 0.04}}
@@ -213,7 +215,7 @@ def test_damping_starts_at_its_lower_bound_zero():
 
 def test_the_registry_names_and_selection():
     assert set(BUILTIN_EFFECTS) == {"friction", "damping", "dead_time", "saturation", "backlash", "dead_zone",
-                                    "cogging", "overflow"}
+                                    "cogging", "overflow", "sensor_limit", "sensor_offset"}
     assert [e.name for e in select_effects(["dead_time", " friction"], BUILTIN_EFFECTS)] == ["dead_time", "friction"]
     with pytest.raises(SdnnError, match="did you mean 'friction'"):
         select_effects(["fricton"], BUILTIN_EFFECTS)

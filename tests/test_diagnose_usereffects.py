@@ -22,11 +22,14 @@ def _set(diagram, name, value):
 
 
 def _hand(term: str, blocks: str):
-    """The one-mass chart written by hand with one more torque `term` against the motion and its `blocks`."""
+    """The one-mass chart written by hand with one more torque `term` against the motion and its `blocks` (at the
+    paper's scheme, as tests/data/diagnose/one_mass.yaml pins it)."""
     return diagram_from_text(f"""
 sdnn: 1
 name: hand
 sample_time: 0.001
+substeps: 1
+delays: search
 inputs: {{F: {{}}}}
 outputs: {{v: {{}}}}
 parameters: {{m: {{init: 2.4}}, b: {{init: 0.4}}}}

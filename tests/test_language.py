@@ -30,7 +30,10 @@ from tests.test_rtrl import assert_jacobian_matches
 
 def chart(blocks: str, outputs: str = "y: {}", parameters: str = "{}", sample_time: float = 0.01,
           inputs: str = "u: {}") -> str:
-    return (f"sdnn: 1\nname: t\nsample_time: {sample_time}\ninputs: {{{inputs}}}\noutputs: {{{outputs}}}\n"
+    """A chart at the paper's scheme (`substeps: 1`, `delays: search`): the hand values and eigenvalues below
+    are those of one step per sample, and the subject is the language, not the discretization."""
+    return (f"sdnn: 1\nname: t\nsample_time: {sample_time}\nsubsteps: 1\ndelays: search\n"
+            f"inputs: {{{inputs}}}\noutputs: {{{outputs}}}\n"
             f"parameters: {parameters}\nblocks:\n" + "\n".join("  " + line for line in blocks.strip().splitlines())
             + "\n")
 
@@ -302,7 +305,8 @@ def test_bad_new_blocks_are_one_line_errors_with_file_and_line(block, fragment):
         diagram_from_text(chart(block, inputs="u: {}, v: {}"), "bad.yaml")
     text = str(info.value)
     assert fragment in text and "bad.yaml:" in text
-    assert info.value.diagnostics[0].location.line == 8
+    # the block's line in chart(): sdnn, name, sample_time, substeps, delays, inputs, outputs, parameters, blocks
+    assert info.value.diagnostics[0].location.line == 10
 
 
 def test_a_learned_curve_as_a_factor_is_refused_with_a_fix():

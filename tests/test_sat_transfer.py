@@ -11,6 +11,7 @@ CHART = """
 sdnn: 1
 name: clipped_lag
 sample_time: 0.01
+substeps: 1        # the hand recursion and the quasi-online kernel: one step per sample
 inputs: {u: {}}
 outputs: {y: {}}
 parameters:

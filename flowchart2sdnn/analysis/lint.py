@@ -78,6 +78,8 @@ def _unused(diagram: Diagram):
     for b in diagram.blocks:
         if b.k is not None:
             used_params |= b.k.variables
+        if b.kind == "integrator" and isinstance(b.init, str):  # `init: <parameter>` (or "data")
+            used_params.add(b.init)
     for p in diagram.parameters:
         if p.name not in used_params:
             yield Diagnostic("LINT003", "warning", f"parameter '{p.name}' is used by no block", _loc(diagram, p),

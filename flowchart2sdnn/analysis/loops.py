@@ -11,9 +11,10 @@ back to a block still on the search path are the feedback edges. Forward paths f
 first, so they never carry a delay; the keys depend on the chart's structure, not on the order of the YAML,
 and names only break exact structural ties.
 
-With `delays: torques` (the rule chosen for accuracy) every edge that closes a loop into a *speed sum* -- a
-sum that feeds an integrator through a gain, Newton's sum of torques before its 1/J -- is delayed first, and
-the search above breaks whatever loops remain. Speeds then follow from the previous step's torques and angles
+With `delays: torques` (the rule chosen for accuracy, and the default: DEFAULT_DELAYS) every edge that closes a
+loop into a *speed sum* -- a sum that feeds an integrator through a gain, Newton's sum of torques before its
+1/J -- is delayed first, and the search above breaks whatever loops remain (all of them, on a chart without a
+speed sum: there `torques` is `search`). `delays: search` is the search alone. Speeds then follow from the previous step's torques and angles
 from the new speeds: symplectic Euler for every mass, where the search alone may delay a neighbour's speed
 instead (`w2 -> dw`), which lets a mass feel a shaft torque computed from a one-step-old neighbour and errs
 several times more on a chain of masses. The set is structural, so the choice still ignores the YAML order.
@@ -28,7 +29,10 @@ import networkx as nx
 from ..diagram.model import Diagram
 from .graph import algebraic_graph, chart_graph, delay_free_graph, distances
 
-__all__ = ["LoopReport", "analyse_loops", "find_algebraic_loops", "torque_edges"]
+__all__ = ["DEFAULT_DELAYS", "LoopReport", "analyse_loops", "delay_rule", "find_algebraic_loops", "torque_edges"]
+
+#: the delay rule of a chart without `delays`
+DEFAULT_DELAYS = "torques"
 
 _KIND_RANK = {"input": 0, "constant": 1, "sum": 2, "gain": 3, "function": 4, "nonlinear": 5, "delay": 6,
               "integrator": 7, "product": 8}
@@ -105,11 +109,16 @@ def _take_needed(h: nx.DiGraph, candidates: list[tuple[str, str]]) -> list[tuple
     return taken
 
 
+def delay_rule(diagram: Diagram) -> str:
+    """The chart's `delays`, or DEFAULT_DELAYS when it does not say."""
+    return diagram.delays or DEFAULT_DELAYS
+
+
 def analyse_loops(diagram: Diagram) -> LoopReport:
     g = chart_graph(diagram)
     algebraic = find_algebraic_loops(g)
     full = delay_free_graph(g)
-    candidates = torque_edges(g, full) if diagram.delays == "torques" else []
+    candidates = torque_edges(g, full) if delay_rule(diagram) == "torques" else []
     h = full.copy() if candidates else full
     inputs = [s.name for s in diagram.inputs if s.name in g]
     din = distances(full, inputs)

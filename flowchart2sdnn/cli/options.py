@@ -225,10 +225,10 @@ class _Substeps(click.ParamType):
 
 def substeps_option():
     """``--substeps N|auto``: network steps per data sample, overriding the chart's `substeps` (default: the
-    chart's; a chart without it runs one step per sample, the paper's network)."""
+    chart's; a chart without it gets auto; 1 is the paper's network)."""
     return click.option("--substeps", type=_Substeps(), default=None,
                         help="network steps per sample, N or auto (overrides the chart's 'substeps'; "
-                             "without either: 1, the paper's network)")
+                             "without either: auto; 1 is the paper's network)")
 
 
 def with_substeps(diagram, substeps):

@@ -80,6 +80,8 @@ def emit_network(diagram: Diagram, chart: DiscreteChart, loops: LoopReport, seed
             for k, value in enumerate(nb.init):
                 if value == "data":
                     initial.append(InitialState(m, k, 0.0, nb.name))
+                elif isinstance(value, str):  # a parameter's name: the start is that parameter
+                    initial.append(InitialState(m, k, float(diagram.parameter(value).init), parameter=value))
                 elif value:
                     initial.append(InitialState(m, k, float(value)))
     units = {s.name: s.unit for s in diagram.outputs}

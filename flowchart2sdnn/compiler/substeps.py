@@ -1,4 +1,4 @@
-"""How many network steps per data sample: `substeps: N` as given, or `auto` from the network's fastest mode.
+"""How many network steps per data sample: `substeps: N` as given, or `auto` (the default) from the fastest mode.
 
 The paper's scheme (implicit Euler forward, one step of delay in every feedback loop) is first order: a mode of
 angular frequency w is carried with a phase and amplitude error of about w*h/2 per unit of its own amplitude.
@@ -21,19 +21,22 @@ from ..diagram.model import Diagram
 from ..network.model import Network
 from ..network.stability import rest_eigenvalues
 
-__all__ = ["AUTO_BOUND", "AUTO_CAP", "SubstepChoice", "fastest_mode", "choose_substeps"]
+__all__ = ["AUTO_BOUND", "AUTO_CAP", "DEFAULT_SUBSTEPS", "SubstepChoice", "fastest_mode", "choose_substeps"]
 
 #: auto keeps omega_max * h at or below this (rad per network step)
 AUTO_BOUND = 0.01
 #: auto never takes more steps per sample than this
 AUTO_CAP = 32
+#: what a chart without `substeps` (and no --substeps) gets; `substeps: 1` is the paper's network
+DEFAULT_SUBSTEPS = "auto"
 #: eigenvalues of smaller modulus are not modes (see fastest_mode)
 ZERO_MODULUS = 1e-3
 
 
 @dataclass(frozen=True)
 class SubstepChoice:
-    """The sub-steps used and why: `requested` is the chart's or the caller's value (None: not given)."""
+    """The sub-steps used and why: `requested` is the chart's or the caller's value (None: not given, so
+    DEFAULT_SUBSTEPS)."""
 
     substeps: int
     requested: int | str | None
@@ -43,14 +46,12 @@ class SubstepChoice:
     def explain(self, sample_time: float) -> str:
         h = sample_time / self.substeps
         text = f"substeps N = {self.substeps} (h = T/N = {h:g} s)"
-        if self.requested == "auto":
+        if (self.requested or DEFAULT_SUBSTEPS) == "auto":
             w = self.omega_max or 0.0
-            text += (f", auto: fastest mode at rest {w:.4g} rad/s ({w / (2 * math.pi):.4g} Hz), "
+            text += (f", auto{' (the default)' if self.requested is None else ''}: fastest mode at rest {w:.4g} rad/s ({w / (2 * math.pi):.4g} Hz), "
                      f"omega_max*h = {w * h:.3g} (bound {AUTO_BOUND:g}, cap {AUTO_CAP})")
             if self.capped:
                 text += " -- the cap binds"
-        elif self.requested is None:
-            text += ", the default"
         return text
 
 
@@ -78,7 +79,7 @@ def substeps_for(omega: float, sample_time: float) -> tuple[int, bool]:
 
 
 def requested_substeps(diagram: Diagram, override: int | str | None = None) -> int | str | None:
-    """The caller's value when given (the command line's --substeps), else the chart's."""
+    """The caller's value when given (the command line's --substeps), else the chart's (None: not given)."""
     return override if override is not None else diagram.substeps
 
 
@@ -90,8 +91,8 @@ def choose_substeps(diagram: Diagram, build, override: int | str | None = None) 
     Euler slows them), and the larger N of the two is kept.
     """
     requested = requested_substeps(diagram, override)
-    if requested != "auto":
-        n = 1 if requested is None else int(requested)
+    if (requested or DEFAULT_SUBSTEPS) != "auto":
+        n = int(requested or DEFAULT_SUBSTEPS)
         return SubstepChoice(n, requested), build(n)
     net = build(1)
     omega = fastest_mode(net)

@@ -13,7 +13,7 @@ import importlib
 # cli.diagnose to register the command) does not pay for numba and scipy.
 _WHERE = {
     **dict.fromkeys(("BUILTIN_EFFECTS", "Backlash", "Cogging", "Damping", "DeadTime", "DeadZone", "Effect",
-                     "Friction", "Saturation", "Scales"), "effects"),
+                     "Friction", "Saturation", "Scales", "SensorLimit", "SensorOffset"), "effects"),
     "Place": "graph",
     **dict.fromkeys(("DiagnoseSettings", "Diagnosis", "Fitted", "diagnose"), "loop"),
     **dict.fromkeys(("Candidate", "Score", "Screen", "gauss_newton_decrease", "screen"), "score"),
@@ -45,6 +45,8 @@ __all__ = [
     "Saturation",
     "Scales",
     "Score",
+    "SensorLimit",
+    "SensorOffset",
     "Screen",
     "YamlEffect",
     "diagnose",

@@ -24,6 +24,9 @@ damping        speed, speed diff.  viscous gain with a new parameter (0) in the 
                                    friction; not in the registry on its own)
 dead_time      input               a delay of n samples in front of every consumer of the input
 saturation     input               L*sat((u - o)/L) + o: a hard clip at o -/+ L, L scanned in the data range
+sensor_limit   output              the same clip on a measured output (a sensor or its converter at its range);
+                                   the chart's block is renamed, the output reads the clipped signal
+sensor_offset  output (read)       the physics reads the measured output + o (o = 0): a sensor's zero offset
 backlash       spring angle        c*x becomes c*x + an odd learned curve (v = 0) of x (a dead zone is learnable)
 dead_zone      spring angle        c*x becomes c*(x - g*sat(x/g)): exact backlash of half gap g (scanned)
 cogging        speed               phi = integral(speed); A sin(p phi) + B cos(p phi) (A = B = 0) in the sum
@@ -49,6 +52,8 @@ from .graph import (
     add_terms,
     fresh_name,
     input_places,
+    output_places,
+    rename_block,
     reroute,
     speed_differences,
     speeds,
@@ -65,6 +70,8 @@ __all__ = [
     "Damping",
     "DeadTime",
     "Saturation",
+    "SensorLimit",
+    "SensorOffset",
     "Backlash",
     "DeadZone",
     "Cogging",
@@ -340,6 +347,19 @@ class DeadTime:
         return f"n={int(option)}"
 
 
+def _clip_blocks(new, signal: str, prefix: str, lim: str, off: str, unit: str | None,
+                 description: str) -> tuple[Block, ...]:
+    """``lim * sat((signal - off) / lim) + off``: constant, difference, clip, gain and the clipped signal last."""
+    c, x, f, g = new(f"{prefix}_o"), new(f"{prefix}_x"), new(f"{prefix}_clip"), new(f"{prefix}_L")
+    return (
+        Block(c, "constant", k=parse_expr(off)),
+        Block(x, "sum", (Term(signal), Term(c, -1))),
+        Block(f, "function", (Term(x),), k=parse_expr(f"1/{lim}"), f="sat"),
+        Block(g, "gain", (Term(f),), k=parse_expr(lim)),
+        Block(new(prefix), "sum", (Term(g), Term(c)), unit=unit, description=description),
+    )
+
+
 @dataclass(frozen=True)
 class Saturation:
     """A hard clip of an input at learned limits ``o - L .. o + L`` (``L * sat((u - o) / L) + o``).
@@ -368,24 +388,104 @@ class Saturation:
         new = _namer(diagram)
 
         lim, off = new(f"{u}_lim"), new(f"{u}_off")
-        c, x, f, g, out = new(f"sat_{u}_o"), new(f"sat_{u}_x"), new(f"sat_{u}_clip"), new(f"sat_{u}_L"), new(f"sat_{u}")
         unit = next((s.unit for s in diagram.inputs if s.name == u), None)
         params = [Parameter(lim, limit, unit=unit, min=0.0, description=f"saturation half-range of {u} (diagnose)"),
                   Parameter(off, 0.0, unit=unit, description=f"saturation centre of {u} (diagnose)")]
-        blocks = [
-            Block(c, "constant", k=parse_expr(off)),
-            Block(x, "sum", (Term(u), Term(c, -1))),
-            Block(f, "function", (Term(x),), k=parse_expr(f"1/{lim}"), f="sat"),
-            Block(g, "gain", (Term(f),), k=parse_expr(lim)),
-            Block(out, "sum", (Term(g), Term(c)), unit=unit, description=f"{u} after saturation (diagnose)"),
-        ]
-        return reroute(add_blocks(diagram, blocks, params), u, out, keep={x})
+        blocks = _clip_blocks(new, u, f"sat_{u}", lim, off, unit, f"{u} after saturation (diagnose)")
+        return reroute(add_blocks(diagram, blocks, params), u, blocks[-1].name, keep={blocks[1].name})
 
     def describe(self) -> str:
         return "saturation: a hard clip of an input at learned limits (scanned from the data's input range)"
 
     def label(self, option) -> str:
         return f"L={float(option):.4g}"
+
+
+@dataclass(frozen=True)
+class SensorLimit:
+    """A measured output clipped at learned limits ``o - L .. o + L``: a sensor, an amplifier or a converter
+    at the end of its range (issue 16). The chart's block keeps its dynamics under a new name and every block
+    that read it reads the new name; the output's name is taken by the clip, so data columns stay mapped.
+
+    L is scanned as fractions of the largest |value| of the current fit's simulation of the output (a clip
+    beyond it changes nothing), o starts at 0; the refit moves both. Outputs started from the data
+    (`init: data`) are not offered: the renamed block would no longer be a measured signal.
+    """
+
+    fractions: tuple[float, ...] = (0.95, 0.9, 0.85, 0.8, 0.75, 0.7, 0.6, 0.5, 0.4)
+    name: str = "sensor_limit"
+    neutral: bool = False
+    extra_dof: int = 0
+
+    def places(self, diagram: Diagram) -> tuple[Place, ...]:
+        return output_places(diagram)
+
+    def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
+        top = max(abs(float(scales.lo.get(place.at, 0.0))), abs(float(scales.hi.get(place.at, 0.0))))
+        if not top > 0:
+            return ()
+        return tuple(round(f * top, 12) for f in self.fractions)
+
+    def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
+        limit = float(option) if option is not None else 1.0
+        y = place.at
+        new = _namer(diagram)
+        inner = new(f"{y}_true")
+        lim, off = new(f"{y}_lim"), new(f"{y}_off")
+        unit = next((s.unit for s in diagram.outputs if s.name == y), None) or diagram.block(y).unit
+        renamed = rename_block(diagram, y, inner)
+        params = [Parameter(lim, limit, unit=unit, min=0.0, description=f"sensor half-range of {y} (diagnose)"),
+                  Parameter(off, 0.0, unit=unit, description=f"sensor range centre of {y} (diagnose)")]
+        clip = _clip_blocks(new, inner, f"sensor_{y}", lim, off, unit,
+                            f"{y} as measured: clipped at the sensor's range (diagnose)")
+        clip = clip[:-1] + (replace(clip[-1], name=y),)
+        return add_blocks(renamed, clip, params)
+
+    def describe(self) -> str:
+        return "sensor_limit: a measured output clipped at learned limits (scanned from the output's range)"
+
+    def label(self, option) -> str:
+        return f"L={float(option):.4g}"
+
+
+@dataclass(frozen=True)
+class SensorOffset:
+    """A measured output that the chart's physics reads as ``y + o``: the sensor reads the physical signal minus
+    a zero offset o (a level sensor's zero, a tachometer's bias), o a new parameter starting at 0 (neutral).
+
+    Offered at outputs that some block reads (an offset of a signal nothing reads is an output bias, which
+    the chart can state with a constant). Measured on Cascaded Tanks: the Torricelli outflow of the lower tank
+    reading the level sensor + 1.5 V lowers the test RMSE from 0.490 to 0.374 V (docs/diagnose.md).
+    """
+
+    name: str = "sensor_offset"
+    neutral: bool = True
+    extra_dof: int = 0
+
+    def places(self, diagram: Diagram) -> tuple[Place, ...]:
+        read = {t.signal for b in diagram.blocks for t in b.inputs}
+        return tuple(Place(s.name, "output") for s in diagram.outputs if s.name in read)
+
+    def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
+        return (None,)
+
+    def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
+        y = place.at
+        new = _namer(diagram)
+        off, const, phys = new(f"{y}_off"), new(f"{y}_offc"), new(f"{y}_phys")
+        unit = next((s.unit for s in diagram.outputs if s.name == y), None) or diagram.block(y).unit
+        p = Parameter(off, 0.0, unit=unit, description=f"zero offset of the {y} sensor: physical = measured + this "
+                      "(diagnose)")
+        blocks = [Block(const, "constant", k=parse_expr(off), unit=unit),
+                  Block(phys, "sum", (Term(y), Term(const)), unit=unit,
+                        description=f"{y} as the physics sees it: measured + offset (diagnose)")]
+        return reroute(add_blocks(diagram, blocks, [p]), y, phys, keep={phys})
+
+    def describe(self) -> str:
+        return "sensor_offset: the physics reads a measured output plus a learned zero offset"
+
+    def label(self, option) -> str:
+        return ""
 
 
 @dataclass(frozen=True)
@@ -531,7 +631,7 @@ class Cogging:
 # ------------------------------------------------------------------------------------------------ registry
 BUILTIN_EFFECTS: dict[str, Effect] = {
     e.name: e for e in (Friction(), Damping(), DeadTime(), Saturation(), Backlash(), DeadZone(), Cogging(),
-                        Overflow())
+                        Overflow(), SensorLimit(), SensorOffset())
 }
 
 

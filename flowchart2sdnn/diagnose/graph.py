@@ -45,7 +45,7 @@ class Place:
         The signal the effect acts on (the report's `at`): a speed, a speed difference, a spring angle or an
         input.
     kind : str
-        "speed", "speed_difference", "spring_angle" or "input".
+        "speed", "speed_difference", "spring_angle", "input", "output" or "state".
     sums : tuple of (str, int)
         Torque sums a new torque enters and the sign that *opposes* the motion there (-1 for the usual
         ``MB = M - friction``). Empty for inputs.
@@ -145,6 +145,12 @@ def input_places(diagram: Diagram) -> tuple[Place, ...]:
     return tuple(Place(s.name, "input") for s in diagram.inputs)
 
 
+def output_places(diagram: Diagram) -> tuple[Place, ...]:
+    """The measured outputs whose block a patch may rename: not those started from the data (`init: data`
+    belongs to the measured signal, which the renamed block would no longer be)."""
+    return tuple(Place(s.name, "output") for s in diagram.outputs if diagram.block(s.name).init != "data")
+
+
 # ---------------------------------------------------------------------------------------------- rewiring
 def fresh_name(diagram: Diagram, base: str, taken: set[str] | frozenset[str] = frozenset()) -> str:
     """`base`, or `base_2`, `base_3`, ... : a name no signal or parameter of the chart uses yet."""
@@ -191,3 +197,9 @@ def reroute(diagram: Diagram, signal: str, new: str, keep: set[str] | frozenset[
             b = replace(b, inputs=tuple(Term(new, t.sign) if t.signal == signal else t for t in b.inputs))
         blocks.append(b)
     return replace(diagram, blocks=tuple(blocks), source_sha256=None)
+
+
+def rename_block(diagram: Diagram, old: str, new: str) -> Diagram:
+    """The chart with block `old` named `new` and every block that read `old` reading `new`."""
+    renamed = tuple(replace(b, name=new) if b.name == old else b for b in diagram.blocks)
+    return reroute(replace(diagram, blocks=renamed, source_sha256=None), old, new)

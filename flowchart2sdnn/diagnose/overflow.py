@@ -10,8 +10,8 @@ integrator ``x`` a new sum takes its old integrand and subtracts an outflow
 the training record, far beyond the one-step overshoot). K is not learned: ``K = 1 / h`` with h the network step (T / substeps), the stiffest
 outflow explicit Euler takes without ringing: above L the next step lands on ``L + h * inflow``, so the clip
 acts within one network step (a projection onto x <= L). The oracle integrates the same stiff term
-continuously and holds x at ``L + inflow / K`` - the same level. (With ``substeps: auto`` the patch assumes
-N = 1, K = 1/T: a softer stop, still stable.)
+continuously and holds x at ``L + inflow / K`` - the same level. (With ``substeps: auto``, given or by default,
+the patch assumes N = 1, K = 1/T: a softer stop, still stable.)
 
 The routed option adds ``g * q`` (g learned, in [0, 1], starting at 0) to the integrand of a downstream
 integrator: one whose integrand takes with a plus sign a term x's integrand takes with a minus sign (the

@@ -27,7 +27,7 @@ def _block_dict(b: Block) -> dict:
     if b.k is not None:
         d["k"] = _yaml_number(b.k.evaluate({})) if b.k.is_constant else str(b.k)
     if b.kind == "integrator" and b.init not in (None, 0.0):
-        d["init"] = b.init if b.init == "data" else _yaml_number(b.init)
+        d["init"] = b.init if isinstance(b.init, str) else _yaml_number(b.init)
     if b.kind == "delay" and b.n not in (None, 1):
         d["n"] = b.n
     if b.kind == "function":

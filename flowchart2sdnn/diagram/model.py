@@ -101,7 +101,8 @@ class Block:
     location: Location | None = None
     # gain, constant, function, product: the factor k (an expression of parameters)
     k: Expr | None = None
-    # integrator: initial value (a number, or "data": the first measured sample of this output)
+    # integrator: initial value (a number, "data": the first measured sample of this output, or a parameter's
+    # name: the start is that parameter, fitted like any other; `init: estimate` adds one, diagram.initestimate)
     init: float | str | None = None
     # delay: samples of pure delay
     n: int | None = None
@@ -134,9 +135,10 @@ class Diagram:
     version: int = FORMAT_VERSION
     file: str = "<chart>"
     source_sha256: str | None = None
-    # network steps per sample: an int >= 1, "auto", or None (not given: 1, today's network)
+    # network steps per sample: an int >= 1 (1: the paper's network), "auto", or None (not given: auto, see
+    # compiler.substeps.DEFAULT_SUBSTEPS)
     substeps: int | str | None = None
-    # which feedback edges are delayed: "search" (None: the default) or "torques"
+    # which feedback edges are delayed: "search" or "torques" (None: not given, torques; analysis.loops.delay_rule)
     delays: str | None = None
     extra: dict = field(default_factory=dict, compare=False, hash=False)
 

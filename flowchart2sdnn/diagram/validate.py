@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..errors import Diagnostic, Location, SdnnError, did_you_mean
 from ..expr import ExprError, parse_expr
+from .initestimate import ESTIMATE, expand_estimated_inits
 from .model import (
     BLOCK_KINDS,
     DELAY_RULES,
@@ -170,7 +171,7 @@ class _Validator:
         self.references(inputs, outputs, blocks)
         if any(d.severity == "error" for d in self.diagnostics):
             return None
-        return Diagram(
+        return expand_estimated_inits(Diagram(
             name=name.strip(),
             description=description,
             sample_time=float(ts),
@@ -183,7 +184,7 @@ class _Validator:
             file=self.doc.file,
             source_sha256=sha256,
             extra={"identified": data.get("identified")} if "identified" in data else {},
-        )
+        ))
 
     def substeps(self, data: Mapping) -> int | str | None:
         """`substeps`: a whole number of network steps per sample (1 to MAX_SUBSTEPS) or `auto`."""
@@ -367,12 +368,14 @@ class _Validator:
             fields["eps"] = eps
         elif kind == "integrator":
             init = spec.get("init", 0.0)
-            if init == "data":
-                fields["init"] = "data"
+            if init in ("data", ESTIMATE) or (isinstance(init, str) and init in pnames):
+                fields["init"] = init
             elif _finite_number(init):
                 fields["init"] = float(init)
             else:
-                self.error("CHART004", f"'init' must be a number or 'data', found {_show(init)}", path + ("init",), name)
+                self.error("CHART004", "'init' must be a number, 'data', 'estimate' or a parameter's name, found "
+                           f"{_show(init)}", path + ("init",), name,
+                           did_you_mean(str(init), ["data", ESTIMATE, *pnames]) if isinstance(init, str) else None)
         elif kind == "delay":
             n = spec.get("n", 1)
             if not isinstance(n, int) or isinstance(n, bool) or not 1 <= n <= MAX_DELAY:

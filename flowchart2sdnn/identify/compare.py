@@ -101,7 +101,7 @@ def predict(compiled: CompiledNetwork, theta: np.ndarray, data: Dataset, alignme
     every = np.arange(flat.n_neurons, dtype=np.int64)
     first = fitted_rows(data.n_rows, alignment).start  # network step t produces row t + first
     out = np.empty((len(p), compiled.n_outputs))
-    hist = last = compiled.initial_history(init)
+    hist = last = compiled.initial_history(init, theta)
     with np.errstate(all="ignore"):
         for s in range(0, len(p), horizon):
             if s > 0:

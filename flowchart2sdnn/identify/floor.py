@@ -17,6 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from ..analysis.loops import delay_rule
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..network.alignment import fitted_rows, run_aligned
@@ -116,7 +117,7 @@ def floor_warnings(floor: dict, residual_rms, chart: Diagram | None, network) ->
     need = n * worst / (FLOOR_WARN / 2) if math.isfinite(worst) else 2 * n
     suggest = max(2 * n, 2 ** math.ceil(math.log2(max(need, 1.0))))
     advice = [f"`substeps: {suggest}` in the chart (or --substeps {suggest}; the floor falls about as 1/N)"]
-    if chart is None or chart.delays != "torques":
+    if chart is None or delay_rule(chart) != "torques":
         advice.append("`delays: torques`")
     return [f"the discretization floor (the network against the continuous chart, identified values, training "
             f"input) is more than {100 * FLOOR_WARN:.0f} % of the residual on {'; '.join(over)}: that part of the "

@@ -107,7 +107,7 @@ def estimate_initial_state(compiled, theta, data: Dataset, alignment: str, windo
     states = state_neurons(compiled)
     u = columns_of(data, compiled.input_names)[:window]
     y = columns_of(data, compiled.output_names)[:window]
-    base = compiled.initial_history(init)
+    base = compiled.initial_history(init, theta)
     measured = {int(k): i for i, k in enumerate(compiled.flat.output_index)}
     for k, _ in states:
         if k in measured:

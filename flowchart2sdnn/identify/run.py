@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .._version import __version__
+from ..analysis.loops import delay_rule
 from ..data.csvdata import Dataset
 from ..diagram.dump import with_values
 from ..diagram.model import Diagram
@@ -105,6 +106,10 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
             raise ValueError("give either a validation record or a split, not both")
         train = full.slice(0, max(3, int(round(settings.split * train.n_rows))))
     problem = build_problem(diagram, train, settings.alignment, settings.seed, more=more)
+    if settings.online and problem.compiled.estimates_starts:
+        raise SdnnError.at("FIT004", "quasi-online identification cannot estimate initial states (init: estimate, "
+                           "or init: <parameter>): its window forgets the record's start", diagram.file,
+                           hint="identify offline, or give the integrator a number as init")
     if settings.online and problem.network.substeps > 1:
         # the quasi-online kernel advances its window one network step per sample
         raise SdnnError.at("FIT004", f"quasi-online identification runs one network step per sample, and this "
@@ -189,7 +194,7 @@ def discretization(diagram, network) -> dict:
     """RESULT.json's `discretization`: the sub-steps asked for and used, the step, the delay rule (identify adds
     `floor`, the network against the continuous chart: :mod:`flowchart2sdnn.identify.floor`)."""
     return {"substeps": network.substeps, "requested": diagram.substeps, "sample_time": network.sample_time,
-            "step": network.step, "delays": diagram.delays or "search"}
+            "step": network.step, "delays": delay_rule(diagram)}
 
 
 def _shooting(settings: IdentifySettings, lm: LMResult | None) -> dict:
@@ -200,9 +205,12 @@ def _shooting(settings: IdentifySettings, lm: LMResult | None) -> dict:
 
 
 def _resolved(chart, network):
-    """The identified chart with `substeps: auto` replaced by the N that was fitted: auto depends on the
-    parameter values, and the identified values must run on the network they were fitted with."""
-    return replace(chart, substeps=network.substeps) if chart.substeps == "auto" else chart
+    """The identified chart naming the network it was fitted with: `substeps: auto` (given or by default)
+    replaced by the N used (auto depends on the parameter values) and the delay rule written out (a default may
+    change; the identified values belong to this network)."""
+    if chart.substeps in (None, "auto"):
+        chart = replace(chart, substeps=network.substeps)
+    return chart if chart.delays is not None else replace(chart, delays=delay_rule(chart))
 
 
 def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:

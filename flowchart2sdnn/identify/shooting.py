@@ -78,6 +78,9 @@ class Segmented:
     def __init__(self, problem: Problem, length: int, weight: float, scale: np.ndarray | None = None):
         self.problem = problem
         compiled = problem.compiled
+        if compiled.estimates_starts:  # the first segment's history would have to carry theta's sensitivity
+            raise SdnnError.at("FIT006", "multiple shooting cannot be combined with estimated initial states "
+                               "(init: estimate, or init: <parameter>) yet", hint="give --shooting off")
         if problem.record_params:  # theta would differ per record: not wired into the segments yet
             raise SdnnError.at("FIT006", "multiple shooting cannot be combined with per-record parameters "
                                f"({', '.join(problem.record_params)}) yet", hint="give --shooting off")

@@ -145,12 +145,14 @@ class OutputSpec:
 
 @dataclass(frozen=True)
 class InitialState:
-    """History of one neuron: a number, or `data`: the first measured sample of output `data`."""
+    """History of one neuron: a number, `data`: the first measured sample of output `data`, or `parameter`:
+    the value of that physical parameter (`value` holds its chart value; a fit differentiates it)."""
 
     layer: int
     neuron: int = 0
     value: float = 0.0
     data: str | None = None
+    parameter: str | None = None
 
 
 @dataclass(frozen=True)
@@ -371,6 +373,8 @@ class Network:
                 raise ValueError("initial state: layer/neuron out of range")
             if s.data is not None and s.data not in {o.name for o in self.outputs}:
                 raise ValueError(f"initial state from data: {s.data!r} is not an output")
+            if s.parameter is not None and s.parameter not in {p.name for p in self.parameters}:
+                raise ValueError(f"initial state from parameter {s.parameter!r}: no such parameter")
 
 
 def _matrix_sort_key(key: tuple) -> tuple:

@@ -117,6 +117,10 @@ class CompiledNetwork:
         self._param_names = {p.name for p in net.parameters}
         self._theta_param = {n: i for i, n in enumerate(self.names) if n in self._param_names}
         self._theta_free = {n: i for i, n in enumerate(self.names) if n not in self._param_names}
+        # states started at a free parameter (`init: <parameter>`): (global neuron, theta index)
+        offsets = self._flat.layer_offset
+        self._theta_starts = tuple((int(offsets[s.layer]) + s.neuron, self._theta_param[s.parameter])
+                                   for s in net.initial_states if s.parameter in self._theta_param)
         self._build_expressions()
         self._build_derivatives()
         self.weights = WeightTable(
@@ -281,15 +285,27 @@ class CompiledNetwork:
         """The flattened network the kernels walk (index arrays, ring buffer length, output rows)."""
         return self._flat
 
-    def initial_history(self, init: Mapping[str, float] | None) -> np.ndarray:
-        """The delay ring buffer before the first sample: zeros, or the given initial outputs (name -> value)."""
+    def initial_history(self, init: Mapping[str, float] | None, theta=None) -> np.ndarray:
+        """The delay ring buffer before the first sample: the chart's initial states, the given initial outputs
+        (name -> value) for states started from data, and, with `theta`, the states started at a parameter
+        (`init: <parameter>`) at theta's value (without it: the parameter's chart value)."""
         if init is not None:
             unknown = sorted(set(init) - set(self.output_names))
             if unknown:
                 raise ValueError(
                     f"init: {unknown} are not outputs of {self.net.name!r} ({list(self.output_names)})"
                 )
-        return self._flat.history_with(init)
+        hist = self._flat.history_with(init)
+        if theta is not None:
+            theta = np.asarray(theta, dtype=float)
+            for k, i in self._theta_starts:
+                hist[k] = theta[i]
+        return hist
+
+    @property
+    def estimates_starts(self) -> bool:
+        """Some state starts at a free parameter: a caller that passes its own history must set it."""
+        return bool(self._theta_starts)
 
     # ------------------------------------------------------------------ running
     @property
@@ -305,9 +321,9 @@ class CompiledNetwork:
         """
         return u if self.net.substeps == 1 else np.repeat(u, self.net.substeps, axis=0)
 
-    def _history(self, init, history) -> np.ndarray:
+    def _history(self, init, history, theta=None) -> np.ndarray:
         if history is None:
-            return self.initial_history(init)
+            return self.initial_history(init, theta)
         hist = np.array(history, dtype=float)
         if hist.shape != (self._flat.n_neurons,) or not np.all(np.isfinite(hist)):
             raise ValueError(f"history must be {self._flat.n_neurons} finite values (one per neuron), "
@@ -316,7 +332,7 @@ class CompiledNetwork:
 
     def _run(self, theta, inputs, init, record: np.ndarray, history=None) -> np.ndarray:
         u = self._steps(self._check_inputs(inputs))
-        hist = self._history(init, history)
+        hist = self._history(init, history, theta)
         conn_val, _ = self.connection_values(theta, with_derivatives=False)
         f = self._flat
         return simulate_kernel(
@@ -368,7 +384,7 @@ class CompiledNetwork:
             ``dyhat[t, o, i] = d yhat[t, o] / d theta[i]``.
         """
         u = self._steps(self._check_inputs(inputs))
-        hist = self._history(init, history)
+        hist = self._history(init, history, theta)
         conn_val, dval = self.connection_values(theta, with_derivatives=True)
         f = self._flat
         record, n_theta, s_init = f.output_index, self.n_theta, None
@@ -378,6 +394,11 @@ class CompiledNetwork:
             n_theta = self.n_theta + len(states)
             s_init = np.zeros((f.n_neurons, n_theta))
             s_init[states, self.n_theta + np.arange(len(states))] = 1.0
+        if history is None and self._theta_starts:  # d history / d theta: 1 where a state is a parameter
+            if s_init is None:
+                s_init = np.zeros((f.n_neurons, n_theta))
+            for k, i in self._theta_starts:
+                s_init[k, i] = 1.0
         return jacobian_kernel(
             u,
             f.conn_ptr,

@@ -326,6 +326,8 @@ def _compile(diagram: Diagram, env: Mapping[str, float], init: Mapping[str, floa
             ti[j, 5] = len(nl)
         elif kind == INTEGRATOR:
             value = init.get(b.name, b.init)
+            if isinstance(value, str) and value in env:  # init names a parameter
+                value = env[value]
             if isinstance(value, str):
                 raise ValueError(f"integrator '{b.name}' has init '{value}': pass its value in `init`")
             x0.append(0.0 if value is None else float(value))
