@@ -159,3 +159,35 @@ def test_cli(tmp_path):
     assert r.exit_code == 0, r.output
     doc = json.loads(out.read_text())
     assert doc["shooting"]["length"] == 100 and doc["shooting"]["stages"][-1]["length"] == 399
+
+
+def test_batch_takes_shooting_and_finds_what_identify_finds(tmp_path):
+    import csv as csvmod
+
+    data = _data(COULOMB_PLANT, 400, 3, ["w1", "w2"])
+    files = tmp_path / "runs"
+    files.mkdir()
+    table = np.column_stack([np.arange(data.n_rows) * load_diagram(COULOMB).sample_time]
+                            + [data.columns[c] for c in ("M1", "w1", "w2")])
+    np.savetxt(files / "d.csv", table, delimiter=",", header="time,M1,w1,w2", comments="", fmt="%.17g")
+    runner = CliRunner()
+    r = runner.invoke(main, ["batch", str(COULOMB), str(files / "d.csv"), "--shooting", "1"])
+    assert r.exit_code == 2 and "shooting" in r.output
+    out = tmp_path / "results.csv"
+    r = runner.invoke(main, ["batch", str(COULOMB), str(files / "d.csv"), "--shooting", "100", "-o", str(out),
+                             "--quiet"])
+    assert r.exit_code == 0, r.output
+    row = next(csvmod.DictReader(out.open()))
+    single = runner.invoke(main, ["identify", str(files / "d.csv"), "--diagram", str(COULOMB), "--shooting", "100",
+                                  "-o", str(tmp_path / "r.json"), "--quiet"])
+    assert single.exit_code == 0, single.output
+    doc = json.loads((tmp_path / "r.json").read_text())
+    for name in ("J2", "c", "d"):
+        assert float(row[name]) == pytest.approx(doc["parameters"][name]["value"], rel=1e-9), name
+    # the setting reached the batch's fit: its last stage starts at the shooting stages' point, so it takes
+    # the shooting run's iterations, not the single-shooting fit's (4 against 9 here)
+    assert int(row["iterations"]) == doc["optimizer"]["iterations"]
+    plain = runner.invoke(main, ["identify", str(files / "d.csv"), "--diagram", str(COULOMB), "-o",
+                                 str(tmp_path / "p.json"), "--quiet"])
+    assert plain.exit_code == 0
+    assert json.loads((tmp_path / "p.json").read_text())["optimizer"]["iterations"] != int(row["iterations"])

@@ -21,6 +21,7 @@ from .options import (
     max_iter_option,
     seed_option,
     settings_usage,
+    shooting_option,
     substeps_option,
     with_substeps,
 )
@@ -69,6 +70,7 @@ def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> li
                  "limit is reported as not converged.", default=1000)
 @alignment_option(None)
 @substeps_option()
+@shooting_option("every file's fit")
 @data_options
 @click.option("--retry-errors", is_flag=True, help="Redo files whose earlier row is an error.")
 @force_option("Start the results table over (it holds other settings).")
@@ -76,8 +78,8 @@ def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> li
               help="Also diagnose each file; the effects it adds (e.g. friction) go to the 'effects' column.")
 @click.option("--quiet", is_flag=True, help="No progress bar and no summary.")
 @handle_errors
-def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_iter, alignment, substeps, mapping,
-          units, retry_errors, force, diagnose, quiet) -> None:
+def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_iter, alignment, substeps, shooting,
+          mapping, units, retry_errors, force, diagnose, quiet) -> None:
     """Identify CHART on every DATA file (paths, directories or quoted globs): one row per file in OUTPUT.
 
     Rerunning the same command skips the files already done, so an interrupted run resumes.
@@ -101,7 +103,7 @@ def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_i
     with settings_usage():
         settings = BatchSettings(
             identify=IdentifySettings(starts=starts, seed=seed, max_iter=max_iter, alignment=alignment,
-                                      fixed_from=tuple(fixed)),
+                                      fixed_from=tuple(fixed), shooting=shooting),
             mapping=tuple(sorted(maps.items())), scales=tuple(sorted(scales.items())), retry_errors=retry_errors, force=force,
             diagnose=diagnose)
     bar = BatchBar(len(files), quiet)

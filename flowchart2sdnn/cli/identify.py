@@ -23,6 +23,7 @@ from .options import (
     rows_option,
     seed_option,
     settings_usage,
+    shooting_option,
     substeps_option,
     windowed,
     with_substeps,
@@ -30,19 +31,6 @@ from .options import (
 from .terminal import CtrlC, Progress
 
 __all__ = ["identify"]
-
-
-def _shooting(value: str):
-    """--shooting: 'off' or a whole number of samples >= 2 (a bad value exits 2 with one line)."""
-    if value == "off":
-        return value
-    try:
-        length = int(value)
-    except ValueError:
-        length = 0
-    if length < 2:
-        raise click.BadParameter(f"expected 'off' or a segment length of at least 2 samples, got {value!r}")
-    return length
 
 
 @click.command(name="identify")
@@ -56,10 +44,7 @@ def _shooting(value: str):
 @click.option("--init-window", type=click.IntRange(min=1), default=None,
               help="Set the validation record's initial state from its first N samples (parameters fixed), then "
                    "run free; scored from row N (EMPS: 20, CED: 4, Cascaded Tanks: 5).")
-@click.option("--shooting", default="off", show_default=True, callback=lambda ctx, param, v: _shooting(v),
-              help="Multiple shooting: 'off', or L: the records cut into segments of L samples (unmeasured "
-                   "integrator states free at each segment start), merged x4 per stage until single shooting "
-                   "over whole records, whose fit is the result.")
+@shooting_option()
 @click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
               help="Train on this leading fraction of DATA, validate on the rest.")
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,

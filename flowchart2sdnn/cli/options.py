@@ -223,6 +223,28 @@ class _Substeps(click.ParamType):
         self.fail(f"{value!r} is not a whole number from 1 to {MAX_SUBSTEPS} or 'auto'", param, ctx)
 
 
+def _shooting(value: str):
+    """--shooting: 'off' or a whole number of samples >= 2 (a bad value exits 2 with one line)."""
+    if value == "off":
+        return value
+    try:
+        length = int(value)
+    except ValueError:
+        length = 0
+    if length < 2:
+        raise click.BadParameter(f"expected 'off' or a segment length of at least 2 samples, got {value!r}")
+    return length
+
+
+def shooting_option(what: str = "the fit"):
+    """``--shooting off|L`` (identify, diagnose, batch): multiple shooting for `what`."""
+    return click.option(
+        "--shooting", default="off", show_default=True, callback=lambda ctx, param, v: _shooting(v),
+        help=f"Multiple shooting for {what}: 'off', or L: the records cut into segments of L samples (unmeasured "
+             "integrator states free at each segment start), merged x4 per stage until single shooting over "
+             "whole records, whose fit is the result.")
+
+
 def substeps_option():
     """``--substeps N|auto``: network steps per data sample, overriding the chart's `substeps` (default: the
     chart's; a chart without it gets auto; 1 is the paper's network)."""
