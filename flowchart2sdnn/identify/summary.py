@@ -95,5 +95,5 @@ def _bias(result: Identification) -> list[str]:
         rows.append([name, f"{b:+.3g}", "" if ratio is None else f"{ratio:.2f}", _g(c["value"]), ci])
     refit = bias.get("refit") or {}
     return ["", f"discretization bias (the network refitted to the continuous chart's noise-free run, "
-                f"{refit.get('iterations')} LM iterations, {refit.get('seconds')} s): corrected = identified - beta",
+                f"{refit.get('iterations')} LM iterations): corrected = identified - beta",
             table(["parameter", "beta", "|beta|/stderr", "corrected", "corrected 95 % interval"], rows).rstrip()]
