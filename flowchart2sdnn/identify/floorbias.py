@@ -32,7 +32,8 @@ from .workers import run_start
 __all__ = ["BIAS_ITER", "BIAS_WARN", "estimate_floor_bias", "floor_bias_warnings"]
 
 #: LM iterations of the bootstrap refit. It starts at theta^, a distance beta (a fraction of a standard error to
-#: a few) from its optimum, on noise-free data: Gauss-Newton converges there in a few steps.
+#: a few) from its optimum, on noise-free data, and converges in a few steps: 6-13 on the Coulomb benches (20 s,
+#: auto), 17 at N = 1; stopped after 3, three-mass d1's beta was 0.41 standard errors against 0.98 converged.
 BIAS_ITER = 20
 #: Warn when |beta| exceeds this many standard errors: from there a 95 % interval (about +-2 standard errors)
 #: centred on theta^ misses the truth visibly more often than 1 in 20.
