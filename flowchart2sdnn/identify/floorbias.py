@@ -78,7 +78,10 @@ def estimate_floor_bias(problem: Problem, chart: Diagram, xs: np.ndarray, record
         return {"beta": None, "skipped": f"the continuous oracle cannot run this chart: {exc}"}
     if not all(np.all(np.isfinite(s.targets)) for s in oracle.segments):
         return {"beta": None, "skipped": "the continuous oracle diverges on these records"}
-    lm = run_start(oracle, np.asarray(xs, dtype=float), lower, upper, replace(options, max_iter=BIAS_ITER))
+    try:
+        lm = run_start(oracle, np.asarray(xs, dtype=float), lower, upper, replace(options, max_iter=BIAS_ITER))
+    except (ValueError, ArithmeticError, np.linalg.LinAlgError) as exc:  # the fit itself ran: say why, go on
+        return {"beta": None, "skipped": f"the refit on the oracle's record failed: {exc}"}
     if not np.all(np.isfinite(lm.x)) or lm.status == "diverged_at_start":
         return {"beta": None, "skipped": f"the refit on the oracle's record failed ({lm.status})"}
     refitted, _ = problem.compiled.values(problem.mean_x(lm.x))
