@@ -106,3 +106,14 @@ def test_cli_switches_it_off(tmp_path, noisy):
     assert res.exit_code == 0, res.output
     doc = json.loads(out.read_text())
     assert "bias" not in doc["discretization"] and doc["settings"]["floor_bias"] is False
+
+
+def test_per_record_parameters_skip_the_bias(tmp_path):
+    """The identified chart holds a per-record parameter's mean: an oracle run of every record at it is no plant."""
+    from test_per_record import OFFSETS, _chart, _record
+
+    chart = _chart(tmp_path)
+    fit = sd.identify(chart, [_record(chart, k, off, noise=0.001) for k, off in enumerate(OFFSETS)], max_iter=30)
+    bias = fit.extra["discretization"]["bias"]
+    assert bias["beta"] is None and "per-record parameters (off)" in bias["skipped"]
+    assert all(e.ci95 == e.ci95_noise for e in fit.parameters.values())

@@ -72,6 +72,9 @@ def estimate_floor_bias(problem: Problem, chart: Diagram, xs: np.ndarray, record
     ``widened`` {name: ci95 widened by |beta| on both sides}, ``ratio`` {name: |beta| / stderr}, ``refit``
     (iterations, status, cost, method; no wall time: the same inputs give byte-identical files); or ``{"beta": None, "skipped": why}``.
     """
+    if problem.record_params:  # the identified chart holds their mean: the oracle would run every record at it
+        return {"beta": None, "skipped": "per-record parameters (" + ", ".join(problem.record_params) + "): the "
+                "identified chart holds their mean, and the oracle would run every record at it"}
     try:
         oracle = _oracle_problem(problem, chart, records)
     except (ValueError, KeyError) as exc:  # the oracle's refusals (e.g. a blow-up) are ValueErrors
