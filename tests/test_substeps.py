@@ -235,7 +235,8 @@ def test_result_records_the_discretization():
     result = sd.identify(d, ds, max_iter=1)
     n = compile_diagram(d).network.substeps
     doc = __import__("json").loads(result.to_json())
-    disc = {k: v for k, v in doc["discretization"].items() if k != "floor"}  # the floor: tests/test_floor.py
+    # the floor: tests/test_floor.py; the bias: tests/test_floorbias.py
+    disc = {k: v for k, v in doc["discretization"].items() if k not in ("floor", "bias")}
     assert disc == {"substeps": n, "requested": "auto", "sample_time": 0.001,
                     "step": pytest.approx(0.001 / n), "delays": "torques"}
     assert result.chart.substeps == n  # the identified chart runs on the network it was fitted with

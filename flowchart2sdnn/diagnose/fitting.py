@@ -174,7 +174,9 @@ def fit_chart(diagram: Diagram, train: list[Dataset], records, settings: Diagnos
 
 def _identify(diagram: Diagram, train: list[Dataset], settings: DiagnoseSettings, max_iter: int,
               progress: Progress | None = None) -> Identification:
-    s = IdentifySettings(max_iter=max_iter, seed=settings.seed, alignment=settings.alignment, lm_tau=settings.lm_tau)
+    # floor_bias off: diagnose compares costs and validation RMS, never the intervals, over many refits
+    s = IdentifySettings(max_iter=max_iter, seed=settings.seed, alignment=settings.alignment, lm_tau=settings.lm_tau,
+                         floor_bias=False)
     return identify(diagram, train if len(train) > 1 else train[0], None, s, progress)
 
 

@@ -74,7 +74,8 @@ def to_document(ident: Identification) -> dict:
         "interrupted": bool(ident.interrupted),
         "converged": ident.converged,
         "parameters": {n: {"value": e.value, "init": e.init, "stderr": e.stderr,
-                           "ci95": None if e.ci95 is None else list(e.ci95), "unit": e.unit, "fixed": e.fixed}
+                           "ci95": None if e.ci95 is None else list(e.ci95), "unit": e.unit, "fixed": e.fixed,
+                           "ci95_noise": None if e.ci95_noise is None else list(e.ci95_noise)}
                        for n, e in ident.parameters.items()},
         "nonlinear": {b: {"a": list(c.a), "v": list(c.v), **({"b": list(c.b)} if c.b is not None else {}),
                           "fixed": c.fixed} for b, c in ident.curves.items()},
@@ -166,7 +167,8 @@ def from_document(doc: dict, chart: Diagram | None = None) -> Identification:
         status=doc["status"], message=doc["message"], interrupted=doc["interrupted"],
         converged=doc.get("converged"),
         parameters={n: Estimate(_nan(p["value"]), _nan(p["init"]), p["stderr"], _tuple(p["ci95"]), p["unit"],
-                                p["fixed"]) for n, p in doc["parameters"].items()},
+                                p["fixed"], _tuple(p.get("ci95_noise", p["ci95"])))  # older files: noise only
+                    for n, p in doc["parameters"].items()},
         curves={b: Curve(tuple(map(_nan, c["a"])), tuple(map(_nan, c["v"])),
                          None if c.get("b") is None else tuple(map(_nan, c["b"])), c["fixed"])
                 for b, c in doc["nonlinear"].items()},

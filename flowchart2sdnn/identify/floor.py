@@ -21,8 +21,9 @@ from ..analysis.loops import delay_rule
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..network.alignment import fitted_rows, run_aligned
+from .problem import columns_of, data_init, network_input_names
 
-__all__ = ["FLOOR_WARN", "oracle_steps", "measure_floor", "floor_warnings", "pooled_floor"]
+__all__ = ["FLOOR_WARN", "oracle_steps", "oracle_rows", "measure_floor", "floor_warnings", "pooled_floor"]
 
 #: Warn when the floor on an output exceeds this fraction of its residual RMS: from there on the network's own
 #: error is a visible part of what the fit calls model error (at 20 % of the RMS it is 4 % of the squared
@@ -45,21 +46,25 @@ def _oracle_init(chart: Diagram, data: Dataset) -> dict[str, float]:
             if b.kind == "integrator" and b.init == "data"}
 
 
-def _one(chart: Diagram, compiled, x, data: Dataset, alignment: str, score_from: int, steps: int) -> np.ndarray:
-    """Network minus oracle on one record's scored rows, (rows, n_outputs) in the network's output order."""
+def oracle_rows(chart: Diagram, data: Dataset, alignment: str, steps: int, names: Sequence[str]) -> np.ndarray:
+    """The oracle's outputs `names` on every row of `data`, row k where the network's row k stands (Q, len(names))."""
     from ..simulate.continuous import simulate_continuous
-    from .problem import columns_of, data_init, network_input_names
 
-    u_net = columns_of(data, network_input_names(compiled.net))
-    y_net = run_aligned(compiled, x, u_net, alignment, data_init(compiled.net, data))
     u = columns_of(data, chart.input_names)
     if alignment == "zoh":  # row k of both is the chart at t_k, input k held over [t_k, t_k+1)
         y_or = simulate_continuous(chart, u, init=_oracle_init(chart, data), substeps=steps)
     else:  # direct: the network's row k has seen input k for one sample, the oracle's row k + 1
         y_or = simulate_continuous(chart, np.vstack([u, u[-1:]]), init=_oracle_init(chart, data), substeps=steps)[1:]
-    order = [chart.output_names.index(n) for n in compiled.output_names]
+    return y_or[:, [chart.output_names.index(n) for n in names]]
+
+
+def _one(chart: Diagram, compiled, x, data: Dataset, alignment: str, score_from: int, steps: int) -> np.ndarray:
+    """Network minus oracle on one record's scored rows, (rows, n_outputs) in the network's output order."""
+    u_net = columns_of(data, network_input_names(compiled.net))
+    y_net = run_aligned(compiled, x, u_net, alignment, data_init(compiled.net, data))
+    y_or = oracle_rows(chart, data, alignment, steps, compiled.output_names)
     start = max(score_from, fitted_rows(data.n_rows, alignment).start)
-    return y_net[start:] - y_or[start:, order]
+    return y_net[start:] - y_or[start:]
 
 
 def measure_floor(chart: Diagram, compiled, x, records: Sequence[tuple[Dataset, int]], alignment: str) -> dict:

@@ -30,7 +30,10 @@ class Estimate:
     """One physical parameter: its identified value, start value, standard error and 95 % interval, unit.
 
     ``stderr`` and ``ci95`` are None when the parameter is fixed or no uncertainty could be computed; they are
-    widened for coloured residuals (see :attr:`Uncertainty.interval_inflation`).
+    widened for coloured residuals (see :attr:`Uncertainty.interval_inflation`). ``ci95`` is also widened by
+    the discretization's bias |beta| on both sides where identify estimated it (RESULT.json
+    `discretization.bias`, identify.floorbias); ``ci95_noise`` is the interval from the noise alone (the
+    Jacobian's covariance; equal to ``ci95`` where no bias was estimated), ``stderr`` always the noise's.
     """
 
     value: float
@@ -39,6 +42,7 @@ class Estimate:
     ci95: tuple[float, float] | None
     unit: str | None
     fixed: bool
+    ci95_noise: tuple[float, float] | None = None
 
 
 @dataclass(frozen=True)

@@ -33,6 +33,7 @@ from ..fit.lm import CONVERGED_STATUSES, LMOptions, LMResult
 from ..fit.multistart import draw_starts, run_multistart
 from .evidence import assess, no_excitation_message, on_bound_warnings, sqrt_domain_warnings, start_stability
 from .floor import floor_warnings, measure_floor
+from .floorbias import estimate_floor_bias, floor_bias_warnings
 from .initstate import estimate_initial_state
 from .perrecord import per_record_estimates
 from .problem import Problem, build_problem, combined_metrics, data_init, metrics
@@ -159,7 +160,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         elif i is not None and evidence.stderr is not None and np.isfinite(evidence.stderr[i]):
             stderr, half = float(evidence.stderr[i]), float(evidence.half[i])
             ci = (float(params[p.name] - half), float(params[p.name] + half))
-        parameters[p.name] = Estimate(float(params[p.name]), float(p.init), stderr, ci, p.unit, i is None)
+        parameters[p.name] = Estimate(float(params[p.name]), float(p.init), stderr, ci, p.unit, i is None, ci)
 
     chart = _resolved(with_values(diagram, params, curves), problem.network)
     fit, state = _fit(problem, xs, settings, train, more, full, validation)
@@ -169,6 +170,16 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     else:
         disc["floor"] = measure_floor(chart, problem.compiled, x, [(d, 0) for d in [train] + more], settings.alignment)
         warnings.extend(floor_warnings(disc["floor"], fit.train.rms, diagram, problem.network))
+        if settings.floor_bias and out.lm is not None and not interrupted and status != "no_excitation":
+            free = {n: e for n, e in parameters.items() if not e.fixed and n not in means}
+            disc["bias"] = estimate_floor_bias(problem, chart, xs, [train] + more, lower, upper,
+                                               lm_options(settings, problem),
+                                               {n: (e.value, e.stderr, e.ci95) for n, e in free.items()})
+            warnings.extend(floor_bias_warnings(disc["bias"], {n: e.stderr for n, e in free.items()}))
+            # the reported interval covers the noise and the discretization's shift (ci95_noise keeps the former)
+            for n, ci in (disc["bias"].get("widened") or {}).items():
+                if ci is not None:
+                    parameters[n] = replace(parameters[n], ci95=(float(ci[0]), float(ci[1])))
     return Identification(
         status=status, message=message, interrupted=bool(interrupted), converged=converged, parameters=parameters,
         curves={b: Curve(tuple(c["a"]), tuple(c["v"]), tuple(c["b"]) if "b" in c else None, c["fixed"])

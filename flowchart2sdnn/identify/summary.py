@@ -53,6 +53,7 @@ def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str
     floor_line = _floor(result)
     if floor_line:
         out.append(floor_line)
+    out.extend(_bias(result))
     ms = result.multistart
     if ms and ms.n > 1:
         out.append("")
@@ -77,3 +78,22 @@ def _floor(result: Identification) -> str | None:
         share = f" ({100 * f / r:.0f} % of RMS)" if r else ""
         parts.append(f"{name} {f:.3g}{share}")
     return ("discretization floor (network vs continuous chart, training input, RMS): " + ", ".join(parts))
+
+
+def _bias(result: Identification) -> list[str]:
+    """The discretization's bias per parameter and the corrected estimates (identify --floor-bias)."""
+    bias = (result.extra.get("discretization") or {}).get("bias")
+    if not isinstance(bias, dict):
+        return []
+    if not bias.get("beta"):
+        return ["", f"discretization bias: not estimated ({bias.get('skipped', 'no refit')})"]
+    rows = []
+    for name, b in bias["beta"].items():
+        c = bias["corrected"][name]
+        ratio = bias["ratio"].get(name)
+        ci = f"[{_g(c['ci95'][0])}, {_g(c['ci95'][1])}]" if c.get("ci95") else ""
+        rows.append([name, f"{b:+.3g}", "" if ratio is None else f"{ratio:.2f}", _g(c["value"]), ci])
+    refit = bias.get("refit") or {}
+    return ["", f"discretization bias (the network refitted to the continuous chart's noise-free run, "
+                f"{refit.get('iterations')} LM iterations): corrected = identified - beta",
+            table(["parameter", "beta", "|beta|/stderr", "corrected", "corrected 95 % interval"], rows).rstrip()]
