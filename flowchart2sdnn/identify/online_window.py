@@ -102,22 +102,33 @@ def _set(u, x, dxdu, conn_val, dval, bnd, wp, stack):
 
 
 # ------------------------------------------------------------------------------------------ network steps
-# `net` = (conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, output_index); the steps are
-# inlined here, so the run keeps strict IEEE order (no fastmath) as before the steps were shared; these
-# wrappers are inlined in turn into the per-sample and per-row loops (a call per sample passed ~100 arguments)
+# `net` = (conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, output_index, substeps); the steps
+# are inlined here, so the run keeps strict IEEE order (no fastmath) as before the steps were shared; these
+# wrappers are inlined in turn into the per-sample and per-row loops (a call per sample passed ~100 arguments).
+# Sub-steps (issue 13): a data sample is `substeps` = N network steps, the offline kernels' stride. `inputs` then
+# holds one row per network step (each sample held over its N steps, OnlineRun.step_inputs), the step counter
+# counts steps (ring slots ``step % ring``, delays in steps), and a sample's output is read at its last step.
 @numba.njit(cache=True, inline="always")
 def rtrl(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2):
-    """:func:`~flowchart2sdnn.network.kernels.rtrl_step` on the run's arrays."""
-    conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, _ = net
-    rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
-              a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2)
+    """:func:`~flowchart2sdnn.network.kernels.rtrl_step` through the N steps of sample t; returns the ring slot
+    of its last step (where its output and sensitivities are)."""
+    conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, _, substeps = net
+    first = t * substeps
+    for step in range(first, first + substeps):
+        rtrl_step(step, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
+                  a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2)
+    return (first + substeps - 1) % a_buf.shape[0]
 
 
 @numba.njit(cache=True, inline="always")
 def simulate(t, inputs, net, conn_val, a_buf, slot_of):
-    """:func:`~flowchart2sdnn.network.kernels.simulate_step` on the run's arrays."""
-    conn_ptr, conn_kind, conn_src, conn_delay, transfer, _, _, _ = net
-    simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, a_buf, slot_of)
+    """:func:`~flowchart2sdnn.network.kernels.simulate_step` through the N steps of sample t; returns the ring
+    slot of its last step."""
+    conn_ptr, conn_kind, conn_src, conn_delay, transfer, _, _, _, substeps = net
+    first = t * substeps
+    for step in range(first, first + substeps):
+        simulate_step(step, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, a_buf, slot_of)
+    return (first + substeps - 1) % a_buf.shape[0]
 
 
 # ------------------------------------------------------------------------------------------ window
@@ -240,14 +251,13 @@ def _replay(inputs, targets, net, conn, dval, dxdu, a, s, s_blk, with_sens, win_
     """Run the window's samples again, oldest first, from the stored state before the oldest row (a gap left
     by a skipped row restarts from that row's stored state, sensitivities from zero).
 
-    Per row q: the state before its sample into ``states[q]``, its error into ``e_out[q]``; with `with_sens`
+    Per row q (all N network steps of its sample): the state before its sample into ``states[q]``, its error into ``e_out[q]``; with `with_sens`
     (RTRL) also into ``c_out[q]`` and its Jacobian row into ``J_out[q]``. Returns 1/2 the sum of the squared
     errors; without `with_sens`, inf once that exceeds `limit` or is not finite."""
     window = win_time.shape[0]
     output_index = net[7]
     count = its[I_COUNT]
     head = its[I_HEAD]
-    ring = a.shape[0]
     n_state = a.size
     states_flat = states.reshape(states.size)  # copied as one flat loop: the 2-D copy cost 0.1 us per row
     a_flat = a.reshape(n_state)
@@ -264,10 +274,9 @@ def _replay(inputs, targets, net, conn, dval, dxdu, a, s, s_blk, with_sens, win_
             for j in range(n_state):
                 states_flat[ix(q * n_state + j)] = a_flat[ix(j)]
             if with_sens:
-                rtrl(tq, inputs, net, conn, dval, a, s, s_blk, False, slot_of, dn, dn2)
+                slot = ix(rtrl(tq, inputs, net, conn, dval, a, s, s_blk, False, slot_of, dn, dn2))
             else:
-                simulate(tq, inputs, net, conn, a, slot_of)
-            slot = ix(tq % ring)
+                slot = ix(simulate(tq, inputs, net, conn, a, slot_of))
             for o in range(output_index.shape[0]):
                 r = ix(output_index[ix(o)])
                 err = targets[ix(tq), ix(o)] - a[slot, r]
