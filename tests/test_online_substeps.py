@@ -189,3 +189,25 @@ def test_quasi_online_with_auto_finds_the_shaft_damping():
     assert steps[1] == 1 and steps["auto"] == compile_diagram(plant).network.substeps > 1
     assert abs(error["auto"]) < 0.005, error
     assert abs(error[1]) > 2 * abs(error["auto"]), error
+
+
+def test_cli_online_with_substeps_auto(tmp_path):
+    # `identify --online --substeps auto` resolves N as offline does (it used to refuse N > 1)
+    from click.testing import CliRunner
+
+    from flowchart2sdnn.cli.main import main
+    from flowchart2sdnn.data.csvdata import write_csv
+
+    plant = load_diagram(DIAGRAMS / "two_mass_coulomb_plant.yaml")
+    write_csv(tmp_path / "d.csv", excite(plant, ExcitationSettings(seconds=2.0, seed=2, noise_std=0.003)),
+              float_format="%.17g")
+    out = tmp_path / "r.json"
+    res = CliRunner().invoke(main, ["identify", str(tmp_path / "d.csv"), "--diagram",
+                                    str(DIAGRAMS / "two_mass_coulomb.yaml"), "--online", "--substeps", "auto",
+                                    "--window", "1000", "--average", "500", "-o", str(out), "--quiet"],
+                             catch_exceptions=False)
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    n = compile_diagram(load_diagram(DIAGRAMS / "two_mass_coulomb.yaml"), substeps="auto").network.substeps
+    assert n > 1 and doc["discretization"]["substeps"] == n and doc["discretization"]["requested"] == "auto"
+    assert doc["status"] == "completed" and doc["online"]["steps"] > 1900
