@@ -274,7 +274,8 @@ class OnlineRun:
                                   compiled.initial_history(init), flat.ring, opt.window, compiled.n_outputs,
                                   opt.average, opt.mu0, replay=opt.tries > 0)
         self.net = (flat.conn_ptr, flat.conn_kind, flat.conn_src, flat.conn_delay, flat.transfer,
-                     compiled.weights.conn_slots, compiled.weights.slot_theta, flat.output_index, int(n_sub))
+                     compiled.weights.conn_slots, compiled.weights.slot_theta, flat.output_index,
+                    np.array([n_sub], dtype=np.int64))  # an array: the tuple stays uniform
         self._bnd = (_bound_codes(self.bounds), np.array(self.bounds.lower, dtype=float),
                      np.array(self.bounds.upper, dtype=float))
         self._fopt = np.array([opt.mu_inc, opt.mu_dec, opt.mu_min, opt.mu_max, opt.tau], dtype=float)

@@ -110,8 +110,10 @@ from .online_window import (  # noqa: F401 - re-exported: the run's state layout
     mu_refused,
     resync,
     rtrl,
+    rtrl_sample,
     scaled_mu,
     simulate,
+    simulate_sample,
     window_rtrl,
     window_sim,
 )
@@ -320,7 +322,8 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
             _new_block(stm, stt, bnd, wp, stack, fs, its)
         if replay:
             before[:, :] = a_buf
-        slot = rtrl(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, active and not replay, slot_of, dn, dn2)
+        slot = rtrl_sample(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, active and not replay, slot_of, dn,
+                           dn2)
         sq = 0.0
         jj = 0.0
         for o in range(n_out):
@@ -338,7 +341,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
         if active and replay:
             trial_ok = False  # no trial runs alongside: a diverged model restarts from the history
         elif active:
-            simulate(t, inputs, net, conn_tr, a_tr, slot_of)  # the model's steps: the same last slot
+            simulate_sample(t, inputs, net, conn_tr, a_tr, slot_of)  # its last step's slot is the model's
             st = 0.0
             for o in range(n_out):
                 r = output_index[o]
