@@ -39,6 +39,7 @@ for _var in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
     os.environ.setdefault(_var, "1")
 
 import argparse  # noqa: E402
+import dataclasses  # noqa: E402
 import json  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
@@ -317,7 +318,8 @@ PLAN = {
 
 def experiment(out_dir: Path, seconds: float = 100.0, starts: int = 16, engine_starts: int = 4, seed: int = 0,
                max_iter: int = 60, tau: float = TAU, modes: Sequence[str] = MODES,
-               log: Callable[[str], None] = print) -> list[Run]:
+               log: Callable[[str], None] = print, substeps: int | str | None = None,
+               delays: str | None = None) -> list[Run]:
     """The whole experiment; returns the runs in table order and writes data and results under `out_dir`.
 
     The ``sdnn identify`` multi-start runs from the second Table 1 start and from both Table 2 starts, the
@@ -331,6 +333,9 @@ def experiment(out_dir: Path, seconds: float = 100.0, starts: int = 16, engine_s
         f"{time.perf_counter() - t:.1f} s)")
     plant = load_diagram(CHARTS / "plant.yaml")
     charts = {1: load_diagram(CHARTS / "engine.yaml"), 2: load_diagram(CHARTS / "two_mass.yaml")}
+    if substeps is not None or delays is not None:  # the charts pin the paper's scheme; rows at another one
+        charts = {k: dataclasses.replace(c, substeps=substeps if substeps is not None else c.substeps,
+                                         delays=delays or c.delays) for k, c in charts.items()}
     data = {1: read_record(paths["engine"], charts[1]), 2: read_record(paths["plant"], charts[2])}
     starts_of = {1: [{"J1": j1} for j1 in TABLE1_STARTS], 2: [{"J2": j2, "d": d, "c": c} for j2, d, c in TABLE2_STARTS]}
     n_multi = {1: engine_starts, 2: starts}
@@ -426,10 +431,14 @@ def main(argv: Sequence[str] | None = None) -> int:
     ap.add_argument("--tau", type=float, default=TAU, help="staged: initial LM damping mu0 = tau * max diag(J^T J)")
     ap.add_argument("--modes", nargs="+", choices=MODES, default=list(MODES), metavar="MODE",
                     help=f"which runs: any of {', '.join(repr(m) for m in MODES)}")
+    ap.add_argument("--substeps", type=lambda v: v if v == "auto" else int(v), default=None,
+                    help="network steps per sample for both stages (default: the charts' 1, the paper's)")
+    ap.add_argument("--delays", choices=("search", "torques", "midpoint"), default=None,
+                    help="the delay rule for both stages (default: the charts' search, the paper's)")
     args = ap.parse_args(argv)
     t = time.perf_counter()
     runs = experiment(args.out, args.seconds, args.starts, args.engine_starts, args.seed, args.max_iter,
-                      args.tau, args.modes)
+                      args.tau, args.modes, substeps=args.substeps, delays=args.delays)
     truth = truth_values(load_diagram(CHARTS / "plant.yaml"))
     text = tables(runs, truth, rows=round(args.seconds / 0.001) - 1)
     (args.out / "tables.md").write_text(text, encoding="utf-8")

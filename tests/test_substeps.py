@@ -214,17 +214,6 @@ def test_cli_substeps_option(tmp_path):
         assert "--substeps" in runner.invoke(main, [command, "--help"]).output
 
 
-def test_online_refuses_substeps():
-    import flowchart2sdnn as sd
-
-    d = load_diagram(DIAGRAMS / "three_mass.yaml")
-    data = excite(load_diagram(DIAGRAMS / "three_mass_plant.yaml"), ExcitationSettings(seconds=0.2, seed=1))
-    ds = sd.dataset_from_frame(__import__("pandas").DataFrame(data), time="time", inputs=["M1"],
-                               outputs=["w1", "w2", "w3"])
-    with pytest.raises(SdnnError, match="one network step per sample"):
-        sd.identify(d, ds, online=True, window=50, average=50)
-
-
 def test_result_records_the_discretization():
     import flowchart2sdnn as sd
 

@@ -13,7 +13,12 @@ step (the numba kernel :mod:`.online_kernel` states both and why):
 
 This module validates the arguments, runs the kernel in chunks (progress callback, Ctrl-C between chunks) and
 packs the result. Memory is O(Q (P + N) + K P) whatever the record length (N: the network's nodes), plus the
-decimated records.
+decimated records and, with sub-steps, the inputs held per network step (substeps x the record's inputs).
+
+Sub-steps (a network of ``substeps`` > 1, issue 13): every sample runs that many network steps with its input
+held (as :meth:`~flowchart2sdnn.network.runtime.CompiledNetwork.simulate`), RTRL through all of them; the
+sample's row (J, e) is read at its last step, the window stores the state at sample boundaries and simulates
+its samples again step by step. Sizes and times (window, block, start, ...) stay in samples.
 
 The reported estimate is the mean of the accepted parameters over the last K = ``average`` steps (window
 mode: samples) and the reported error the mean window cost over the same steps, as in the paper's Tables 1
@@ -239,7 +244,8 @@ class OnlineRun:
     Validates the arguments (see :func:`quasi_online`) and allocates the state; :meth:`advance` runs the
     kernel, :meth:`result` packs an :class:`OnlineResult`. Exposed for tests and tools that inspect the
     window (:attr:`state`) or the current trial (:meth:`trial_theta`); :attr:`net` holds the flat network's
-    arrays in the order the kernel takes them.
+    arrays in the order the kernel takes them, then its sub-steps N; :attr:`step_inputs` the input of every
+    network step (:attr:`inputs` itself when N = 1), which the kernel functions take as `inputs`.
     """
 
     def __init__(self, compiled: CompiledNetwork, inputs, targets, theta0=None, lower=None, upper=None,
@@ -249,6 +255,10 @@ class OnlineRun:
         self.options = opt
         self.inputs = _checked(inputs, "inputs", compiled.input_names, None)
         self.n_samples = self.inputs.shape[0]
+        # sub-steps: the kernel reads one input row per network step, each sample held over its N steps (the
+        # zero-order hold of Runtime.simulate); N = 1 passes the record itself
+        n_sub = compiled.substeps
+        self.step_inputs = self.inputs if n_sub == 1 else np.repeat(self.inputs, n_sub, axis=0)
         self.targets = _checked(targets, "targets", compiled.output_names, self.n_samples)
         names = compiled.names
         x0 = compiled.theta0() if theta0 is None else np.array(theta0, dtype=float).reshape(-1)
@@ -264,7 +274,8 @@ class OnlineRun:
                                   compiled.initial_history(init), flat.ring, opt.window, compiled.n_outputs,
                                   opt.average, opt.mu0, replay=opt.tries > 0)
         self.net = (flat.conn_ptr, flat.conn_kind, flat.conn_src, flat.conn_delay, flat.transfer,
-                     compiled.weights.conn_slots, compiled.weights.slot_theta, flat.output_index)
+                     compiled.weights.conn_slots, compiled.weights.slot_theta, flat.output_index,
+                    np.array([n_sub], dtype=np.int64))  # an array: the tuple stays uniform
         self._bnd = (_bound_codes(self.bounds), np.array(self.bounds.lower, dtype=float),
                      np.array(self.bounds.upper, dtype=float))
         self._fopt = np.array([opt.mu_inc, opt.mu_dec, opt.mu_min, opt.mu_max, opt.tau], dtype=float)
@@ -287,7 +298,7 @@ class OnlineRun:
         if self.diverged_at_start:
             return False
         st = self.state
-        code = ok.online_chunk(self.done, min(int(end), self.n_samples), self.inputs, self.targets, self.net,
+        code = ok.online_chunk(self.done, min(int(end), self.n_samples), self.step_inputs, self.targets, self.net,
                                self.program.exprs, self._bnd, self._fopt, self._iopt, st.model(), st.trial(),
                                st.window(), st.replay(), (st.avg_x, st.avg_cost), st.fs, st.its, st.div_t, self._rec_x,
                                self._rec_cost, self._rec_mu)

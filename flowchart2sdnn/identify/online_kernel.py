@@ -110,8 +110,10 @@ from .online_window import (  # noqa: F401 - re-exported: the run's state layout
     mu_refused,
     resync,
     rtrl,
+    rtrl_sample,
     scaled_mu,
     simulate,
+    simulate_sample,
     window_rtrl,
     window_sim,
 )
@@ -277,7 +279,8 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
                  rec_x, rec_cost, rec_mu):
     """Advance the quasi-online run over samples ``[t0, t1)`` (global indices into `inputs`/`targets`).
 
-    net  = (conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, output_index)
+    net  = (conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, output_index, substeps N);
+           `inputs` has one row per network step (N per sample), `targets` one per sample
     wp   = :attr:`WeightProgram.exprs`;  bnd = (bound code (P,) int, lower (P,), upper (P,))
     fopt = [mu_inc, mu_dec, mu_min, mu_max, tau]
     iopt = [start, every, block, record_every, stack size, tries, min_block]  (tries 0: trial mode)
@@ -317,10 +320,10 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
         active = t >= start
         if t == start:
             _new_block(stm, stt, bnd, wp, stack, fs, its)
-        slot = t % ring
         if replay:
             before[:, :] = a_buf
-        rtrl(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, active and not replay, slot_of, dn, dn2)
+        slot = rtrl_sample(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, active and not replay, slot_of, dn,
+                           dn2)
         sq = 0.0
         jj = 0.0
         for o in range(n_out):
@@ -338,7 +341,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
         if active and replay:
             trial_ok = False  # no trial runs alongside: a diverged model restarts from the history
         elif active:
-            simulate(t, inputs, net, conn_tr, a_tr, slot_of)
+            simulate_sample(t, inputs, net, conn_tr, a_tr, slot_of)  # its last step's slot is the model's
             st = 0.0
             for o in range(n_out):
                 r = output_index[o]

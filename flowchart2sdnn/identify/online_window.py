@@ -102,22 +102,47 @@ def _set(u, x, dxdu, conn_val, dval, bnd, wp, stack):
 
 
 # ------------------------------------------------------------------------------------------ network steps
-# `net` = (conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, output_index); the steps are
-# inlined here, so the run keeps strict IEEE order (no fastmath) as before the steps were shared; these
-# wrappers are inlined in turn into the per-sample and per-row loops (a call per sample passed ~100 arguments)
+# `net` = (conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, output_index, [substeps]) (the
+# last an int64 array of one, so that the tuple stays uniform); the steps are inlined here, so the run keeps
+# strict IEEE order (no fastmath) as before the steps were shared; these wrappers are inlined in turn into the
+# per-sample and per-row loops (a call per sample passed ~100 arguments).
+# Sub-steps (issue 13): a data sample is N = substeps network steps, the offline kernels' stride. `inputs` then
+# holds one row per network step (each sample held over its N steps, OnlineRun.step_inputs), the step counter
+# counts steps (ring slots ``step % ring``, delays in steps), and a sample's output is read at its last step.
 @numba.njit(cache=True, inline="always")
 def rtrl(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2):
-    """:func:`~flowchart2sdnn.network.kernels.rtrl_step` on the run's arrays."""
-    conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, _ = net
+    """:func:`~flowchart2sdnn.network.kernels.rtrl_step` at network step t on the run's arrays."""
+    conn_ptr, conn_kind, conn_src, conn_delay, transfer, dptr, dtheta, _, _ = net
     rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
               a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2)
 
 
 @numba.njit(cache=True, inline="always")
 def simulate(t, inputs, net, conn_val, a_buf, slot_of):
-    """:func:`~flowchart2sdnn.network.kernels.simulate_step` on the run's arrays."""
-    conn_ptr, conn_kind, conn_src, conn_delay, transfer, _, _, _ = net
+    """:func:`~flowchart2sdnn.network.kernels.simulate_step` at network step t on the run's arrays."""
+    conn_ptr, conn_kind, conn_src, conn_delay, transfer, _, _, _, _ = net
     simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, a_buf, slot_of)
+
+
+@numba.njit(cache=True, inline="always")
+def rtrl_sample(t, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2):
+    """:func:`rtrl` through the N steps of sample t; returns the ring slot of its last step (its output and
+    sensitivities)."""
+    n_sub = net[8][0]
+    first = t * n_sub
+    for step in range(first, first + n_sub):
+        rtrl(step, inputs, net, conn_val, dval, a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2)
+    return (first + n_sub - 1) % a_buf.shape[0]
+
+
+@numba.njit(cache=True, inline="always")
+def simulate_sample(t, inputs, net, conn_val, a_buf, slot_of):
+    """:func:`simulate` through the N steps of sample t; returns the ring slot of its last step."""
+    n_sub = net[8][0]
+    first = t * n_sub
+    for step in range(first, first + n_sub):
+        simulate(step, inputs, net, conn_val, a_buf, slot_of)
+    return (first + n_sub - 1) % a_buf.shape[0]
 
 
 # ------------------------------------------------------------------------------------------ window
@@ -286,6 +311,59 @@ def _replay(inputs, targets, net, conn, dval, dxdu, a, s, s_blk, with_sens, win_
 
 
 @numba.njit(cache=True)
+def _replay_substeps(inputs, targets, net, conn, dval, dxdu, a, s, s_blk, with_sens, win_state, win_time, its, states,
+            e_out, c_out, J_out, limit, slot_of, dn, dn2):
+    """:func:`_replay` with N > 1 network steps per sample (the states stored and restored are those at sample
+    boundaries). A copy rather than a branch in :func:`_replay`: a loop over sub-steps in that function made its
+    one-step rows 2.5x slower (measured on the paper's motor stage; the same bits either way); here one step
+    loop per branch (rather than :func:`rtrl_sample` / :func:`simulate_sample`) ran 23 % faster at N = 3."""
+    window = win_time.shape[0]
+    output_index = net[7]
+    count = its[I_COUNT]
+    head = its[I_HEAD]
+    n_state = a.size
+    ring = a.shape[0]
+    n_sub = net[8][0]
+    states_flat = states.reshape(states.size)  # copied as one flat loop: the 2-D copy cost 0.1 us per row
+    a_flat = a.reshape(n_state)
+    cost = 0.0
+    q = (head - count + window) % window
+    i = 0
+    while i < count:  # a run of consecutive samples, from its stored state (as its own loop: a restore
+        a[:, :] = win_state[q]  # branch inside the per-row loop made that loop twice as slow)
+        if with_sens:
+            s[:, :, :] = 0.0
+        prev = win_time[ix(q)] - 1
+        while i < count and win_time[ix(q)] == prev + 1:
+            tq = win_time[ix(q)]
+            for j in range(n_state):
+                states_flat[ix(q * n_state + j)] = a_flat[ix(j)]
+            first = tq * n_sub
+            if with_sens:
+                for step in range(first, first + n_sub):
+                    rtrl(step, inputs, net, conn, dval, a, s, s_blk, False, slot_of, dn, dn2)
+            else:
+                for step in range(first, first + n_sub):
+                    simulate(step, inputs, net, conn, a, slot_of)
+            slot = ix((first + n_sub - 1) % ring)
+            for o in range(output_index.shape[0]):
+                r = ix(output_index[ix(o)])
+                err = targets[ix(tq), ix(o)] - a[slot, r]
+                e_out[ix(q), ix(o)] = err
+                cost += err * err
+                if with_sens:
+                    c_out[ix(q), ix(o)] = err
+                    for p in range(dxdu.shape[0]):
+                        J_out[ix(q), ix(o), ix(p)] = s[slot, r, ix(p)] * dxdu[ix(p)]
+            if not with_sens and (not 0.5 * cost <= limit or cost > 1e300):
+                return math.inf
+            prev = tq
+            q = q + 1 if q + 1 < window else 0
+            i += 1
+    return 0.5 * cost
+
+
+@numba.njit(cache=True)
 def window_sim(inputs, targets, net, conn, win_state, win_time, its, a_tr, slot_of, e_tr, tr_state,
                limit=math.inf):
     """Simulate the window's samples again with the connection values `conn` (a trial), see :func:`_replay`.
@@ -295,8 +373,11 @@ def window_sim(inputs, targets, net, conn, win_state, win_time, its, a_tr, slot_
     run is not finite or as soon as that cost exceeds `limit` (a refused trial need not be run to its end)."""
     no_s = np.empty((1, 1, 1))
     no_p = np.empty(0)
-    return _replay(inputs, targets, net, conn, no_p, no_p, a_tr, no_s, no_s, False, win_state, win_time, its,
-                   tr_state, e_tr, e_tr, no_s, limit, slot_of, no_p, no_p)
+    if net[8][0] == 1:
+        return _replay(inputs, targets, net, conn, no_p, no_p, a_tr, no_s, no_s, False, win_state, win_time, its,
+                       tr_state, e_tr, e_tr, no_s, limit, slot_of, no_p, no_p)
+    return _replay_substeps(inputs, targets, net, conn, no_p, no_p, a_tr, no_s, no_s, False, win_state, win_time,
+                            its, tr_state, e_tr, e_tr, no_s, limit, slot_of, no_p, no_p)
 
 
 @numba.njit(cache=True)
@@ -308,8 +389,12 @@ def window_rtrl(inputs, targets, net, stm, wnd, win_state, win_time, its, slot_o
     (call :func:`resync`)."""
     dxdu, conn_val, dval, a_buf, s_buf, s_blk = stm[2], stm[3], stm[4], stm[5], stm[6], stm[7]
     win_J, win_c, win_e = wnd[0], wnd[1], wnd[2]
-    _replay(inputs, targets, net, conn_val, dval, dxdu, a_buf, s_buf, s_blk, True, win_state, win_time, its,
-            win_state, win_e, win_c, win_J, math.inf, slot_of, dn, dn2)
+    if net[8][0] == 1:
+        _replay(inputs, targets, net, conn_val, dval, dxdu, a_buf, s_buf, s_blk, True, win_state, win_time, its,
+                win_state, win_e, win_c, win_J, math.inf, slot_of, dn, dn2)
+    else:
+        _replay_substeps(inputs, targets, net, conn_val, dval, dxdu, a_buf, s_buf, s_blk, True, win_state, win_time,
+                         its, win_state, win_e, win_c, win_J, math.inf, slot_of, dn, dn2)
 
 
 @numba.njit(cache=True)

@@ -111,11 +111,6 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         raise SdnnError.at("FIT004", "quasi-online identification cannot estimate initial states (init: estimate, "
                            "or init: <parameter>): its window forgets the record's start", diagram.file,
                            hint="identify offline, or give the integrator a number as init")
-    if settings.online and problem.network.substeps > 1:
-        # the quasi-online kernel advances its window one network step per sample
-        raise SdnnError.at("FIT004", f"quasi-online identification runs one network step per sample, and this "
-                           f"chart asks for {problem.network.substeps} (substeps: {diagram.substeps})",
-                           diagram.file, hint="give --substeps 1 with --online, or identify offline")
     x0 = problem.expand(problem.compiled.theta0())  # every record's own value starts at the chart's
     problem, warnings = start_stability(problem, x0)
     lower, upper = problem.bounds()
