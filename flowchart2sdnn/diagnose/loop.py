@@ -32,6 +32,8 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
+import numpy as np
+
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
@@ -55,7 +57,7 @@ from .fitting import (
 from .score import Candidate, Score, Screen, screen
 
 __all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "refit_unit", "refusal", "fit_chart", "horizons",
-           "candidates", "done_key", "whole_run_stop", "REPORT_FORMAT", "REPORT_VERSION"]
+           "candidates", "done_key", "gain_spread", "whole_run_stop", "REPORT_FORMAT", "REPORT_VERSION"]
 
 REPORT_FORMAT = "sdnn-diagnose"
 REPORT_VERSION = 1
@@ -135,9 +137,29 @@ def refusal(after: Fitted, before: Fitted, settings: DiagnoseSettings) -> str | 
         need = f"below {math.sqrt(room):.4g}" if room > 0 else "the whole validation RMS is within the floor"
         return (f"validation RMS {before.validation_rms:.4g} -> {after.validation_rms:.4g} is what the "
                 f"discretization floor {floor:.3g} can explain ({need}); use `substeps: auto`, `delays: torques`")
+    spread = gain_spread(after, before)
+    if settings.spread_z and spread is not None:
+        gain = before.validation_rms ** 2 - after.validation_rms ** 2
+        need = (floor or 0.0) ** 2 + settings.spread_z * spread
+        if not gain > need:
+            return (f"validation MSE fell by {gain:.3g} ({before.validation_rms:.4g} -> {after.validation_rms:.4g} "
+                    f"RMS), not more than the floor\u00b2 {(floor or 0.0) ** 2:.3g} plus {settings.spread_z:g} x "
+                    f"its spread over the validation parts {spread:.3g}")
     if not after.criterion(settings.criterion) < before.criterion(settings.criterion):
         return f"{settings.criterion.upper()} did not fall"
     return None
+
+
+def gain_spread(after: Fitted, before: Fitted) -> float | None:
+    """The standard error of the validation MSE's fall from `before` to `after`, from its spread over the parts
+    of the validation records (:data:`~.fitting.VALIDATION_SEGMENTS`): the fall of each part, paired (the same
+    rows), sd / sqrt(parts). None with fewer than 3 parts or where a part is not finite."""
+    b, a = before.validation_segments, after.validation_segments
+    if len(b) < 3 or b.shape != a.shape or not (np.all(np.isfinite(b)) and np.all(np.isfinite(a))):
+        return None
+    n_out = max(len(before.validation["records"][0]["rms"]), 1)
+    fall = (b[:, 1] - a[:, 1]) / (b[:, 0] * n_out)
+    return float(np.std(fall, ddof=1) / math.sqrt(len(fall)))
 
 
 def whole_run_stop(last_round: str, n_accepted: int) -> str:
