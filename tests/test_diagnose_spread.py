@@ -12,8 +12,8 @@ import math
 import numpy as np
 import pytest
 
-from flowchart2sdnn.diagnose.fitting import DiagnoseSettings, Fitted
-from flowchart2sdnn.diagnose.loop import gain_spread, refusal
+from flowchart2sdnn.diagnose.fitting import DiagnoseSettings, Fitted, gain_spread
+from flowchart2sdnn.diagnose.loop import refusal
 
 
 def _fitted(parts_sse: list[float], rows: int = 100, n_out: int = 2, cost: float = 1.0, floor=None) -> Fitted:

@@ -24,7 +24,7 @@ from .effects import Scales
 from .residual import signal_correlation, whiteness
 
 __all__ = ["DiagnoseSettings", "Fitted", "fit_chart", "with_floor", "fit_growing", "horizons", "current_problem", "effect_scales",
-           "residual_analysis", "DEFAULT_SPLIT"]
+           "residual_analysis", "DEFAULT_SPLIT", "VALIDATION_SEGMENTS", "gain_spread"]
 
 DEFAULT_SPLIT = 0.7
 #: The validation records are cut into about this many consecutive parts in all (at least 2 per record): the
@@ -201,6 +201,18 @@ def _fitted(ident: Identification, records, settings: DiagnoseSettings, extra_do
     cost = math.inf if cost is None else float(cost)
     return Fitted(ident, cost, ident.problem.n_residuals, len(ident.problem.names) + extra_dof,
                   _validate(ident, records, settings.alignment, settings.init_window), start, accepted)
+
+
+def gain_spread(after: Fitted, before: Fitted) -> float | None:
+    """The standard error of the validation MSE's fall from `before` to `after`, from its spread over the parts
+    of the validation records (:data:`VALIDATION_SEGMENTS`): the fall of each part, paired (the same
+    rows), sd / sqrt(parts). None with fewer than 3 parts or where a part is not finite."""
+    b, a = before.validation_segments, after.validation_segments
+    if len(b) < 3 or b.shape != a.shape or not (np.all(np.isfinite(b)) and np.all(np.isfinite(a))):
+        return None
+    n_out = max(len(before.validation["records"][0]["rms"]), 1)
+    fall = (b[:, 1] - a[:, 1]) / (b[:, 0] * n_out)
+    return float(np.std(fall, ddof=1) / math.sqrt(len(fall)))
 
 
 def with_floor(fitted: Fitted, records, settings: DiagnoseSettings) -> Fitted:

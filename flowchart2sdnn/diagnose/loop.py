@@ -32,8 +32,6 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field, replace
 
-import numpy as np
-
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
@@ -50,6 +48,7 @@ from .fitting import (
     effect_scales,
     fit_chart,
     fit_growing,
+    gain_spread,
     horizons,
     residual_analysis,
     with_floor,
@@ -148,18 +147,6 @@ def refusal(after: Fitted, before: Fitted, settings: DiagnoseSettings) -> str | 
     if not after.criterion(settings.criterion) < before.criterion(settings.criterion):
         return f"{settings.criterion.upper()} did not fall"
     return None
-
-
-def gain_spread(after: Fitted, before: Fitted) -> float | None:
-    """The standard error of the validation MSE's fall from `before` to `after`, from its spread over the parts
-    of the validation records (:data:`~.fitting.VALIDATION_SEGMENTS`): the fall of each part, paired (the same
-    rows), sd / sqrt(parts). None with fewer than 3 parts or where a part is not finite."""
-    b, a = before.validation_segments, after.validation_segments
-    if len(b) < 3 or b.shape != a.shape or not (np.all(np.isfinite(b)) and np.all(np.isfinite(a))):
-        return None
-    n_out = max(len(before.validation["records"][0]["rms"]), 1)
-    fall = (b[:, 1] - a[:, 1]) / (b[:, 0] * n_out)
-    return float(np.std(fall, ddof=1) / math.sqrt(len(fall)))
 
 
 def whole_run_stop(last_round: str, n_accepted: int) -> str:
