@@ -65,6 +65,9 @@ class DiagnoseSettings:
     # an effect's validation MSE gain must exceed floor² + spread_z x the standard error of the gain, read off its
     # spread over the parts of the validation records (loop.refusal, loop.gain_spread); 0: no spread test
     spread_z: float = 2.0
+    # judge each round's candidates also against the current chart refitted as briefly without any effect
+    # (loop._control): False only to measure what that control prevents
+    control_refit: bool = True
     # trace only from a converged first fit (False: --allow-unconverged, trace anyway)
     require_converged: bool = True
     # > 0: each validation record's initial state is fitted on its first init_window samples (identify.initstate)
