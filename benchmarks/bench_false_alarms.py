@@ -92,7 +92,8 @@ def run_one(key: str, noise: float, seed: int, seconds: float, settings: Diagnos
             "val_before": rep["before"]["validation_rms"], "val_after": rep["after"]["validation_rms"],
             "floor": rep["before"].get("validation_floor"), "refused": _refused(rep), "wall": wall,
             "rounds": [{k: r.get(k) for k in ("round", "effect", "at", "label", "accepted", "reason",
-                                               "validation_rms_before", "validation_rms_after")}
+                                               "validation_rms_before", "validation_rms_after", "validation_gain_spread",
+                                               "control")}
                        for r in rep["rounds"]],
             "substeps": (rep["final"].get("discretization") or {}).get("substeps")}
 

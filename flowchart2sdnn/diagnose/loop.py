@@ -290,6 +290,16 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                 raise KeyboardInterrupt
             baseline = current
             if control is not None and control.validation_rms < current.validation_rms:
+                # the current fit had not finished: finish the control as an accepted chart is polished, and judge
+                # the candidates against that (an effect's extra freedom can speed a descent the chart as it is
+                # would also complete: the false-alarm bench's backlash, below)
+                say(f"round {r}: the current fit was not at its minimum; finishing it", None)
+                finished = fit_chart(control.diagram, train, records, settings, settings.max_iter, extra_dof,
+                                     control.start, None, control.accepted)
+                if _was_interrupted(finished):
+                    raise KeyboardInterrupt
+                if finished.cost <= control.cost and finished.validation_rms <= control.validation_rms:
+                    control = finished
                 baseline = with_floor(control, records, settings)
             choice, reason = None, "no refit succeeded"
             for s, f in refits:
