@@ -394,8 +394,9 @@ def _control(current: Fitted, nominal_chart: Diagram, train: list[Dataset], reco
 
     A candidate must beat this, not only the current fit: when the current fit has not finished its descent (or
     sits in a local minimum) any effect's refit goes further down, and without this control the effect takes the
-    credit (issue 16; false-alarm bench, two-mass, noise 0.01, first fit unconverged after 400 iterations: a
-    cogging term p = 12 was accepted, validation RMS 0.0154 -> 0.0120, docs/diagnose.md)."""
+    credit (one-mass chart traced from its init: damping accepted, validation RMS 0.076 -> 0.020, the noise;
+    tests/test_diagnose_false_alarms.py). It does not see a local minimum both its starts share (false-alarm
+    bench, docs/diagnose.md)."""
     acc = tuple(a["effect"] + "@" + a["at"] for a in accepted)
     plain = replace(settings, horizon=0)
     units = [(current.diagram, train, records, plain, settings.refit_iter, extra_dof, "control", acc),
