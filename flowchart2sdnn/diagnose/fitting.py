@@ -63,7 +63,7 @@ class DiagnoseSettings:
     horizon: int = 500
     lm_tau: float = REFIT_TAU  # see identify.settings: the brief refits start next to a fit
     # an effect's validation MSE gain must exceed floor² + spread_z x the standard error of the gain, read off its
-    # spread over the parts of the validation records (loop.refusal, loop.gain_spread); 0: no spread test
+    # spread over the parts of the validation records (loop.refusal, gain_spread); 0: no spread test
     spread_z: float = 2.0
     # judge each round's candidates also against the current chart refitted as briefly without any effect
     # (loop._control): False only to measure what that control prevents

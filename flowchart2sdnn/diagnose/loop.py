@@ -292,7 +292,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             if control is not None and control.validation_rms < current.validation_rms:
                 # the current fit had not finished: finish the control as an accepted chart is polished, and judge
                 # the candidates against that (an effect's extra freedom can speed a descent the chart as it is
-                # would also complete: the false-alarm bench's backlash, below)
+                # would also complete, and a brief control may stop short of where that descent ends)
                 say(f"round {r}: the current fit was not at its minimum; finishing it", None)
                 finished = fit_chart(control.diagram, train, records, settings, settings.max_iter, extra_dof,
                                      control.start, None, control.accepted)
