@@ -82,6 +82,9 @@ def _int_list(text: str) -> tuple[int, ...]:
               help="Information criterion that must fall for an effect to be accepted.")
 @click.option("--min-gain", type=click.FloatRange(0, 1, max_open=True), default=0.02, show_default=True,
               help="The validation RMS must fall by at least this fraction.")
+@click.option("--spread-z", type=click.FloatRange(min=0), default=2.0, show_default=True,
+              help="The validation MSE must fall by more than the floor squared plus this many standard errors of "
+                   "its fall, read off the fall's spread over the parts of the validation records (0: off).")
 @click.option("--alpha", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=1e-3,
               show_default=True, help="Significance level of the score test.")
 @click.option("--dead-time-max", type=click.IntRange(min=1, max=10000), default=20, show_default=True,
@@ -104,7 +107,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 @executor_options("the candidate refits")
 @handle_errors
 def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
-             refit_iter, max_iter, horizon, top, criterion, min_gain, alpha, dead_time_max, harmonics, init_window,
+             refit_iter, max_iter, horizon, top, criterion, min_gain, spread_z, alpha, dead_time_max, harmonics, init_window,
              allow_unconverged, alignment, substeps, mapping, units, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
     """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
     chart, refit, and report the error before and after."""
@@ -147,7 +150,8 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     val = [read_csv(v, cols, maps, diagram.sample_time, scale=scales) for v in validation]
     with settings_usage():
         settings = DiagnoseSettings(rounds=rounds, top=top, refit_iter=refit_iter, max_iter=max_iter,
-                                    alpha=alpha, criterion=criterion, min_gain=min_gain, alignment=alignment,
+                                    alpha=alpha, criterion=criterion, min_gain=min_gain, spread_z=spread_z,
+                                    alignment=alignment,
                                     seed=seed, split=split, horizon=horizon,
                                     require_converged=not allow_unconverged, init_window=init_window or 0)
     progress = Progress(quiet)

@@ -6,7 +6,7 @@ Layer: diagnose.
 from __future__ import annotations
 
 from ..strictjson import finite_or_none
-from .fitting import DiagnoseSettings, Fitted
+from .fitting import DiagnoseSettings, Fitted, gain_spread
 from .score import Score
 
 __all__ = ["summary", "round_entry"]
@@ -34,6 +34,8 @@ def round_entry(r: int, s: Score, before: Fitted, after: Fitted | None, accepted
         "rms_before": finite_or_none(before.rms), "rms_after": finite_or_none(a.rms) if a else None,
         "validation_rms_before": finite_or_none(before.validation_rms),
         "validation_rms_after": finite_or_none(a.validation_rms) if a else None,
+        # the standard error of the validation MSE's fall, from its spread over the validation parts (refusal)
+        "validation_gain_spread": finite_or_none(gain_spread(a, before)) if a else None,
         "aic_before": finite_or_none(before.aic), "aic_after": finite_or_none(a.aic) if a else None,
         "bic_before": finite_or_none(before.bic), "bic_after": finite_or_none(a.bic) if a else None,
         "before": summary(before), "after": summary(a) if a else None,

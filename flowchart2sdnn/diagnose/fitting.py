@@ -24,9 +24,13 @@ from .effects import Scales
 from .residual import signal_correlation, whiteness
 
 __all__ = ["DiagnoseSettings", "Fitted", "fit_chart", "with_floor", "fit_growing", "horizons", "current_problem", "effect_scales",
-           "residual_analysis", "DEFAULT_SPLIT"]
+           "residual_analysis", "DEFAULT_SPLIT", "VALIDATION_SEGMENTS", "gain_spread"]
 
 DEFAULT_SPLIT = 0.7
+#: The validation records are cut into about this many consecutive parts in all (at least 2 per record): the
+#: spread of the validation error's fall from part to part is what a candidate's gain is weighed against
+#: (loop.refusal). 10 parts of a 15 s record are 1.5 s each, 15 periods of the slowest shaft mode of the benches.
+VALIDATION_SEGMENTS = 10
 
 Progress = Callable[[str, "float | None"], None]
 
@@ -58,6 +62,12 @@ class DiagnoseSettings:
     # RMS 0.079 against 0.056)
     horizon: int = 500
     lm_tau: float = REFIT_TAU  # see identify.settings: the brief refits start next to a fit
+    # an effect's validation MSE gain must exceed floor² + spread_z x the standard error of the gain, read off its
+    # spread over the parts of the validation records (loop.refusal, gain_spread); 0: no spread test
+    spread_z: float = 2.0
+    # judge each round's candidates also against the current chart refitted as briefly without any effect
+    # (loop._control): False only to measure what that control prevents
+    control_refit: bool = True
     # trace only from a converged first fit (False: --allow-unconverged, trace anyway)
     require_converged: bool = True
     # > 0: each validation record's initial state is fitted on its first init_window samples (identify.initstate)
@@ -77,6 +87,8 @@ class DiagnoseSettings:
             raise ValueError("criterion must be 'aic' or 'bic'")
         if not 0 <= self.min_gain < 1:
             raise ValueError("min_gain must lie in [0, 1)")
+        if not (self.spread_z >= 0 and math.isfinite(self.spread_z)):
+            raise ValueError("spread_z must be a finite number >= 0")
         if self.horizon < 0:
             raise ValueError("horizon must not be negative")
         if self.split is not None and not 0 < self.split < 1:
@@ -120,6 +132,12 @@ class Fitted:
         each = self.validation.get("rms_records", [])
         return float(np.median(each)) if each else math.nan
 
+    @property
+    def validation_segments(self) -> np.ndarray:
+        """(parts, 2): rows and squared error (every output) of each part of every validation record, in order."""
+        parts = [seg for m in self.validation.get("records", []) for seg in m.get("segments", [])]
+        return np.array([[r, math.inf if s is None else s] for r, s in parts], dtype=float).reshape(-1, 2)
+
     def criterion(self, which: str) -> float:
         if not (self.cost > 0 and math.isfinite(self.cost)):
             return -math.inf if self.cost == 0 else math.inf
@@ -151,15 +169,17 @@ def _validate(ident: Identification, records: Sequence[tuple[Dataset, int]], ali
     starts from the integrators' state fitted on its first `init_window` rows (parameters fixed) and is scored
     from the later of that row and the record's own first row."""
     compiled = ident.problem.compiled
+    parts = max(2, math.ceil(VALIDATION_SEGMENTS / max(len(records), 1)))
     per = []
     for ds, start in records:
         if init_window:
             state = estimate_initial_state(compiled, ident.x, ds, alignment, init_window,
                                            data_init(ident.problem.network, ds))
-            m = metrics(compiled, ident.x, ds, alignment, score_from=max(start, init_window), history=state.history)
+            m = metrics(compiled, ident.x, ds, alignment, score_from=max(start, init_window), history=state.history,
+                        segments=parts)
             m["initial_state"] = state.to_dict()
         else:
-            m = metrics(compiled, ident.x, ds, alignment, score_from=start)
+            m = metrics(compiled, ident.x, ds, alignment, score_from=start, segments=parts)
         per.append(m)
     return {"rms_all": _rms_all(per, compiled.n_outputs), "records": per,
             "rms_records": [_rms_all([m], compiled.n_outputs) for m in per]}
@@ -186,6 +206,18 @@ def _fitted(ident: Identification, records, settings: DiagnoseSettings, extra_do
     cost = math.inf if cost is None else float(cost)
     return Fitted(ident, cost, ident.problem.n_residuals, len(ident.problem.names) + extra_dof,
                   _validate(ident, records, settings.alignment, settings.init_window), start, accepted)
+
+
+def gain_spread(after: Fitted, before: Fitted) -> float | None:
+    """The standard error of the validation MSE's fall from `before` to `after`, from its spread over the parts
+    of the validation records (:data:`VALIDATION_SEGMENTS`): the fall of each part, paired (the same
+    rows), sd / sqrt(parts). None with fewer than 3 parts or where a part is not finite."""
+    b, a = before.validation_segments, after.validation_segments
+    if len(b) < 3 or b.shape != a.shape or not (np.all(np.isfinite(b)) and np.all(np.isfinite(a))):
+        return None
+    n_out = max(len(before.validation["records"][0]["rms"]), 1)
+    fall = (b[:, 1] - a[:, 1]) / (b[:, 0] * n_out)
+    return float(np.std(fall, ddof=1) / math.sqrt(len(fall)))
 
 
 def with_floor(fitted: Fitted, records, settings: DiagnoseSettings) -> Fitted:

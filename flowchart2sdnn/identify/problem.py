@@ -261,10 +261,12 @@ def network_input_names(network: Network) -> list[str]:
 
 
 def metrics(compiled: CompiledNetwork, x: np.ndarray, data: Dataset, alignment: str, init=None,
-            score_from: int = 0, history: np.ndarray | None = None) -> dict:
+            score_from: int = 0, history: np.ndarray | None = None, segments: int = 0) -> dict:
     """Free-run fit metrics on a record: cost E (eq. 4), RMS and fit % per output, on rows >= score_from.
 
     `history` (every neuron's value before the first step, see identify.initstate) replaces the initial state.
+    `segments` > 0 adds ``"segments"``: [[rows, squared error summed over every output], ...] on that many
+    consecutive equal parts of the scored rows (how the error spreads along the record; diagnose's refusal).
     """
     network = compiled.net
     u = columns_of(data, network_input_names(network))
@@ -284,6 +286,9 @@ def metrics(compiled: CompiledNetwork, x: np.ndarray, data: Dataset, alignment: 
             out["rms"][name] = finite_or_none(np.sqrt(np.mean(ei**2)))
             spread = np.linalg.norm(yi - yi.mean())
             out["fit_percent"][name] = finite_or_none(100.0 * (1.0 - np.linalg.norm(ei) / spread)) if spread > 0 else None
+        if segments > 0:
+            out["segments"] = [[int(len(part)), finite_or_none(float(np.sum(part**2)))]
+                               for part in np.array_split(e, min(segments, max(len(e), 1)))]
     return out
 
 

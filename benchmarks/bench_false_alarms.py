@@ -1,0 +1,141 @@
+"""False alarms of `diagnose` on complete charts (issue 13 "no false alarms from the floor", issue 16's first row).
+
+The plants are continuous (`sdnn excite`: RK4 of the plant chart, 20 steps per sample, T = 1 ms, the paper's
+APRBS + relay excitation), with Stribeck friction on every machine:
+
+* ``two``: diagrams/two_mass_plant.yaml, charted by diagrams/two_mass_learned.yaml;
+* ``three``: diagrams/three_mass_stribeck_plant.yaml, charted by diagrams/three_mass_learned.yaml.
+
+Both charts are complete: the same shafts, every speed measured, each machine's friction a learned curve (3 tanh
+neurons) plus a viscous term, `substeps: auto`, `delays: torques`. Per seed: one training record (``--seconds``,
+excitation seed = seed) and one validation record (half as long, excitation seed = 1000 + seed), both with white
+noise of ``--noise`` rad/s on every speed; the chart's free parameters start at the truth times a factor drawn
+log-uniformly within x/÷2 (numpy default_rng(seed)). `diagnose` (the library call, default settings, serial)
+then must accept nothing. Printed per run: what the first fit did, what was accepted, the validation RMS
+before/after, the discretization floor on the validation record (`before.validation_floor`), the best refused
+candidate of round 1 and why it was refused, the wall time.
+
+Run from the repository root:
+``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_false_alarms.py [--plants two,three] [--noise 0.003,0.01,0.03]
+[--n-seeds 3] [--seconds 30] [--max-iter 100] [--json OUT.json]`` (one run: 1-10 min on a shared core).
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import dataclasses  # noqa: E402
+import json  # noqa: E402
+import math  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
+from flowchart2sdnn.diagnose import DiagnoseSettings, diagnose  # noqa: E402
+from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
+
+BENCHES = {"two": ("two_mass_plant", "two_mass_learned"), "three": ("three_mass_stribeck_plant", "three_mass_learned")}
+
+
+def record(plant, seconds: float, seed: int, noise: float):
+    data = excite(plant, ExcitationSettings(seconds=seconds, seed=seed, noise_std=noise))
+    return dataset_from_frame(data, time="time", inputs=list(plant.input_names), outputs=list(plant.output_names),
+                              name=f"{plant.name}-seed{seed}-noise{noise:g}")
+
+
+def rough_chart(chart, seed: int):
+    """`chart` with each free parameter's init (the truth) times a factor in [1/2, 2], log-uniform, seeded."""
+    rng = np.random.default_rng(seed)
+    params, factors = [], {}
+    for p in chart.parameters:
+        if p.fixed:
+            params.append(p)
+            continue
+        f = float(np.exp(rng.uniform(-math.log(2), math.log(2))))
+        factors[p.name] = f
+        params.append(dataclasses.replace(p, init=p.init * f))
+    return dataclasses.replace(chart, parameters=tuple(params)), factors
+
+
+def _refused(report: dict) -> str:
+    """Round 1's outcome when nothing was accepted there: the best refitted candidate and why it was refused."""
+    for r in report["rounds"]:
+        if not r["accepted"]:
+            return f"{r['effect']}@{r['at']}: {r['reason']}"
+    return ""
+
+
+def run_one(key: str, noise: float, seed: int, seconds: float, settings: DiagnoseSettings) -> dict:
+    plant_name, chart_name = BENCHES[key]
+    plant = load_diagram(ROOT / "diagrams" / f"{plant_name}.yaml")
+    chart, factors = rough_chart(load_diagram(ROOT / "diagrams" / f"{chart_name}.yaml"), seed)
+    train = record(plant, seconds, seed, noise)
+    val = record(plant, seconds / 2, 1000 + seed, noise)
+    t0 = time.perf_counter()
+    rep = diagnose(chart, train, [val], settings).report
+    wall = time.perf_counter() - t0
+    first = rep["first_fit"]
+    return {"plant": key, "noise": noise, "seed": seed, "seconds": seconds, "init_factors": factors,
+            "first_fit_converged": first["converged"], "first_fit_status": first["status"],
+            "train_rms_before": rep["before"]["rms"],
+            "stop": rep["stop"], "accepted": [f"{a['effect']}@{a['at']} ({a['label']})" for a in rep["accepted"]],
+            "val_before": rep["before"]["validation_rms"], "val_after": rep["after"]["validation_rms"],
+            "floor": rep["before"].get("validation_floor"), "refused": _refused(rep), "wall": wall,
+            "rounds": [{k: r.get(k) for k in ("round", "effect", "at", "label", "accepted", "reason",
+                                               "validation_rms_before", "validation_rms_after", "validation_gain_spread",
+                                               "control")}
+                       for r in rep["rounds"]],
+            "substeps": (rep["final"].get("discretization") or {}).get("substeps")}
+
+
+def _f(v, fmt=".4f") -> str:
+    return "—" if v is None else format(v, fmt)
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--plants", default="two,three")
+    ap.add_argument("--noise", default="0.003,0.01,0.03")
+    ap.add_argument("--n-seeds", type=int, default=3)
+    ap.add_argument("--first-seed", type=int, default=1)
+    ap.add_argument("--seconds", type=float, default=30.0, help="training record; validation is half as long")
+    ap.add_argument("--max-iter", type=int, default=None, help="diagnose's max_iter (default: its own)")
+    ap.add_argument("--allow-unconverged", action="store_true", help="trace even when the first fit did not converge")
+    ap.add_argument("--json", default=None, help="append one JSON line per run to this file")
+    args = ap.parse_args()
+    settings = DiagnoseSettings(require_converged=not args.allow_unconverged)
+    if args.max_iter is not None:
+        settings = dataclasses.replace(settings, max_iter=args.max_iter)
+    rows = []
+    print("| plant | noise | seed | N | first fit | train RMS | accepted | val RMS before → after | floor | "
+          "round 1 refused | stop | wall |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|", flush=True)
+    for key in args.plants.split(","):
+        for noise in (float(x) for x in args.noise.split(",")):
+            for seed in range(args.first_seed, args.first_seed + args.n_seeds):
+                r = run_one(key, noise, seed, args.seconds, settings)
+                rows.append(r)
+                print(f"| {key} | {noise:g} | {seed} | {r['substeps']} | "
+                      f"{'converged' if r['first_fit_converged'] else r['first_fit_status']} | "
+                      f"{_f(r['train_rms_before'])} | {', '.join(r['accepted']) or 'nothing'} | "
+                      f"{_f(r['val_before'])} → {_f(r['val_after'])} | {_f(r['floor'])} | {r['refused']} | "
+                      f"{r['stop']} | {r['wall']:.0f} s |", flush=True)
+                if args.json:
+                    with open(args.json, "a") as fh:
+                        fh.write(json.dumps(r) + "\n")
+    alarms = sum(1 for r in rows if r["accepted"])
+    print(f"\nfalse alarms: {alarms} of {len(rows)} runs")
+
+
+if __name__ == "__main__":
+    main()
