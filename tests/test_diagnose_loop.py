@@ -143,3 +143,23 @@ def test_cli_runs_user_effects_from_a_file(files):
     report = json.loads((files / "user.json").read_text())
     assert {c["effect"] for c in report["candidates"]} == {"stiction", "gain_error"}
     assert report["settings"]["effects"] == ["stiction", "gain_error"]
+
+
+def test_shooting_reaches_the_full_fits():
+    """--shooting L: the chart as given and the accepted chart's final fit (both max_iter fits) run with multiple
+    shooting (their stages in their RESULT), and the missing friction is still found."""
+    plant = chart("one_mass_friction_plant")
+    train = record(plant, 6.0, 3, NOISE, **EXCITATION)
+    val = record(plant, 3.0, 101, NOISE, **EXCITATION)
+    effects = [BUILTIN_EFFECTS[n] for n in ("friction", "damping")]
+    d = diagnose(chart("one_mass"), train, [val], DiagnoseSettings(rounds=1, shooting=500), effects)
+    stages = d.nominal.identification.to_document()["shooting"]["stages"]
+    assert [s["length"] for s in stages] == [500, 2000, 5999]
+    assert d.report["accepted"][0]["effect"] == "friction"
+    assert [s["length"] for s in d.report["final"]["shooting"]["stages"]] == [500, 2000, 5999]
+    with pytest.raises(ValueError, match="shooting"):
+        DiagnoseSettings(shooting=1)
+    runner = CliRunner()
+    r = runner.invoke(main, ["diagnose", str(DATA / "one_mass.yaml"), "--diagram", str(DATA / "one_mass.yaml"),
+                             "--shooting", "x"])
+    assert r.exit_code == 2 and "shooting" in r.output

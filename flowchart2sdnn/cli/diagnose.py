@@ -24,6 +24,7 @@ from .options import (
     rows_option,
     seed_option,
     settings_usage,
+    shooting_option,
     substeps_option,
     windowed,
     with_substeps,
@@ -94,6 +95,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 @click.option("--init-window", type=click.IntRange(min=1), default=None,
               help="Fit each --validate record's initial state on its first N samples (parameters fixed) and score "
                    "it from sample N on (the public benchmarks' protocol).")
+@shooting_option("the full fits (the chart as given; the brief refits stay single shooting)")
 @click.option("--allow-unconverged", is_flag=True,
               help="Trace even when the first fit of the chart as given did not converge (default: refuse).")
 @alignment_option()
@@ -108,7 +110,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 @handle_errors
 def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
              refit_iter, max_iter, horizon, top, criterion, min_gain, spread_z, alpha, dead_time_max, harmonics, init_window,
-             allow_unconverged, alignment, substeps, mapping, units, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
+             shooting, allow_unconverged, alignment, substeps, mapping, units, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
     """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
     chart, refit, and report the error before and after."""
     from ..atomic import atomic_write_text, check_output_path
@@ -153,7 +155,8 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
                                     alpha=alpha, criterion=criterion, min_gain=min_gain, spread_z=spread_z,
                                     alignment=alignment,
                                     seed=seed, split=split, horizon=horizon,
-                                    require_converged=not allow_unconverged, init_window=init_window or 0)
+                                    require_converged=not allow_unconverged, init_window=init_window or 0,
+                                    shooting=shooting)
     progress = Progress(quiet)
     executor = None
     try:

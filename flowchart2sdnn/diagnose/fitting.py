@@ -73,6 +73,9 @@ class DiagnoseSettings:
     # > 0: each validation record's initial state is fitted on its first init_window samples (identify.initstate)
     # and the record is scored from there (the public benchmarks' protocol)
     init_window: int = 0
+    # multiple shooting (identify.shooting) for the full fits (the chart as given, a finished control or
+    # candidate: max_iter iterations); the brief refits start next to a fit and stay single shooting
+    shooting: str | int = "off"
 
     def __post_init__(self) -> None:
         if self.rounds < 0:
@@ -95,6 +98,9 @@ class DiagnoseSettings:
             raise ValueError("split must lie strictly between 0 and 1")
         if not (isinstance(self.init_window, int) and self.init_window >= 0):
             raise ValueError(f"init_window must be a whole number >= 0, got {self.init_window!r}")
+        if not (self.shooting == "off" or (isinstance(self.shooting, int) and not isinstance(self.shooting, bool)
+                                           and self.shooting >= 2)):
+            raise ValueError(f"shooting must be 'off' or a segment length of at least 2 samples, got {self.shooting!r}")
         if self.init_window and self.split is not None:
             raise ValueError("init_window applies to separate validation records, not to a split")
 
@@ -195,8 +201,9 @@ def fit_chart(diagram: Diagram, train: list[Dataset], records, settings: Diagnos
 def _identify(diagram: Diagram, train: list[Dataset], settings: DiagnoseSettings, max_iter: int,
               progress: Progress | None = None) -> Identification:
     # floor_bias off: diagnose compares costs and validation RMS, never the intervals, over many refits
+    full = max_iter >= settings.max_iter
     s = IdentifySettings(max_iter=max_iter, seed=settings.seed, alignment=settings.alignment, lm_tau=settings.lm_tau,
-                         floor_bias=False)
+                         floor_bias=False, shooting=settings.shooting if full else "off")
     return identify(diagram, train if len(train) > 1 else train[0], None, s, progress)
 
 
