@@ -41,10 +41,13 @@ def gdnn(seed: int, substeps: int) -> CompiledNetwork:
     return CompiledNetwork(dataclasses.replace(random_gdnn(seed, layers=(3, 1)), substeps=substeps))
 
 
-def coulomb_chart(substeps: int) -> CompiledNetwork:
-    """The two-mass Coulomb chart (tanh friction, delayed shaft torques) compiled at N sub-steps."""
-    return CompiledNetwork(compile_diagram(load_diagram(DIAGRAMS / "two_mass_coulomb.yaml"),
-                                           substeps=substeps).network)
+def coulomb_chart(substeps: int, delays: str | None = None) -> CompiledNetwork:
+    """The two-mass Coulomb chart (tanh friction, delayed shaft torques) compiled at N sub-steps (and another
+    delay rule: `midpoint` adds delay-2 edges)."""
+    chart = load_diagram(DIAGRAMS / "two_mass_coulomb.yaml")
+    if delays:
+        chart = dataclasses.replace(chart, delays=delays)
+    return CompiledNetwork(compile_diagram(chart, substeps=substeps).network)
 
 
 def free_run(cn: CompiledNetwork, u: np.ndarray, y: np.ndarray) -> OnlineRun:
@@ -56,7 +59,7 @@ def free_run(cn: CompiledNetwork, u: np.ndarray, y: np.ndarray) -> OnlineRun:
 
 
 @pytest.mark.parametrize("n_sub", [2, 4])
-@pytest.mark.parametrize("model", ["gdnn", "coulomb"])
+@pytest.mark.parametrize("model", ["gdnn", "coulomb", "midpoint"])
 def test_free_run_equals_the_offline_simulation(n_sub, model):
     rng = np.random.default_rng(5)
     n = 400
@@ -64,7 +67,9 @@ def test_free_run_equals_the_offline_simulation(n_sub, model):
         cn = gdnn(7, n_sub)
         u = rng.uniform(-1, 1, (n, 1))
     else:
-        cn = coulomb_chart(n_sub)
+        cn = coulomb_chart(n_sub, "midpoint" if model == "midpoint" else None)
+        if model == "midpoint":
+            assert any(w.delay == 2 for w in cn.net.weights)
         u = np.repeat(rng.uniform(-5, 5, n // 20), 20)[:, None]  # a staircase torque: the shaft rings
     assert cn.substeps == n_sub
     y = rng.standard_normal((n, cn.n_outputs))  # any targets: the rows' errors are y - yhat
