@@ -23,7 +23,8 @@ from ..diagram.model import Diagram
 from ..network.alignment import fitted_rows, run_aligned
 from .problem import columns_of, data_init, network_input_names
 
-__all__ = ["FLOOR_WARN", "oracle_steps", "oracle_rows", "measure_floor", "floor_warnings", "pooled_floor"]
+__all__ = ["FLOOR_WARN", "oracle_steps", "oracle_rows", "oracle_runs", "measure_floor", "floor_warnings",
+           "pooled_floor"]
 
 #: Warn when the floor on an output exceeds this fraction of its residual RMS: from there on the network's own
 #: error is a visible part of what the fit calls model error (at 20 % of the RMS it is 4 % of the squared
@@ -58,24 +59,36 @@ def oracle_rows(chart: Diagram, data: Dataset, alignment: str, steps: int, names
     return y_or[:, [chart.output_names.index(n) for n in names]]
 
 
-def _one(chart: Diagram, compiled, x, data: Dataset, alignment: str, score_from: int, steps: int) -> np.ndarray:
+def oracle_runs(chart: Diagram, records: Sequence[Dataset], alignment: str, compiled) -> list[np.ndarray]:
+    """The oracle's run of `chart` on every record (:func:`oracle_rows` at the network's steps, its output
+    order): computed once where the floor and the bias (identify.floorbias) both need it."""
+    steps = oracle_steps(compiled.net.substeps)
+    return [oracle_rows(chart, d, alignment, steps, compiled.output_names) for d in records]
+
+
+def _one(chart: Diagram, compiled, x, data: Dataset, alignment: str, score_from: int, steps: int,
+         y_or: np.ndarray | None = None) -> np.ndarray:
     """Network minus oracle on one record's scored rows, (rows, n_outputs) in the network's output order."""
     u_net = columns_of(data, network_input_names(compiled.net))
     y_net = run_aligned(compiled, x, u_net, alignment, data_init(compiled.net, data))
-    y_or = oracle_rows(chart, data, alignment, steps, compiled.output_names)
+    if y_or is None:
+        y_or = oracle_rows(chart, data, alignment, steps, compiled.output_names)
     start = max(score_from, fitted_rows(data.n_rows, alignment).start)
     return y_net[start:] - y_or[start:]
 
 
-def measure_floor(chart: Diagram, compiled, x, records: Sequence[tuple[Dataset, int]], alignment: str) -> dict:
+def measure_floor(chart: Diagram, compiled, x, records: Sequence[tuple[Dataset, int]], alignment: str,
+                  oracle: Sequence[np.ndarray] | None = None) -> dict:
     """The floor on `records` ((record, first scored row)): ``{"rms": {output: RMS}, "rows", "records",
     "oracle"}``, or ``{"rms": None, "skipped": why}`` where the oracle cannot run the chart or a run diverges.
 
-    `chart` is the chart with the values `x` stands for (the identified chart); `compiled` its network.
+    `chart` is the chart with the values `x` stands for (the identified chart); `compiled` its network;
+    `oracle` the oracle's runs on the records when already computed (:func:`oracle_runs`).
     """
     steps = oracle_steps(compiled.net.substeps)
+    runs = oracle if oracle is not None else [None] * len(records)
     try:
-        diffs = [_one(chart, compiled, x, d, alignment, s, steps) for d, s in records]
+        diffs = [_one(chart, compiled, x, d, alignment, s, steps, y) for (d, s), y in zip(records, runs, strict=True)]
     except (ValueError, KeyError) as exc:  # the oracle's refusals (e.g. a blow-up) are ValueErrors
         return {"rms": None, "skipped": f"the continuous oracle cannot run this chart: {exc}"}
     e = np.vstack(diffs)

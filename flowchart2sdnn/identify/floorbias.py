@@ -25,7 +25,7 @@ from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..fit.lm import LMOptions
 from ..network.alignment import fitted_rows
-from .floor import oracle_rows, oracle_steps
+from .floor import oracle_runs, oracle_steps
 from .problem import Problem
 from .workers import run_start
 
@@ -44,13 +44,14 @@ BETA_SETTLED = 0.05
 BIAS_WARN = 0.5
 
 
-def _oracle_problem(problem: Problem, chart: Diagram, records: Sequence[Dataset]) -> Problem:
-    """`problem` with every record's targets replaced by the continuous oracle's run of `chart` (same rows)."""
-    steps = oracle_steps(problem.network.substeps)
-    targets = []
-    for d in records:
-        y = oracle_rows(chart, d, problem.alignment, steps, problem.compiled.output_names)
-        targets.append(np.ascontiguousarray(y[fitted_rows(d.n_rows, problem.alignment)]))
+def _oracle_problem(problem: Problem, chart: Diagram, records: Sequence[Dataset],
+                    oracle: Sequence[np.ndarray] | None = None) -> Problem:
+    """`problem` with every record's targets replaced by the continuous oracle's run of `chart` (same rows;
+    `oracle`: those runs when already computed, floor.oracle_runs)."""
+    if oracle is None:
+        oracle = oracle_runs(chart, records, problem.alignment, problem.compiled)
+    targets = [np.ascontiguousarray(y[fitted_rows(d.n_rows, problem.alignment)])
+               for d, y in zip(records, oracle, strict=True)]
     segs = problem.segments
     if len(targets) != len(segs) or any(t.shape != s.targets.shape for t, s in zip(targets, segs, strict=False)):
         raise ValueError("the oracle's rows do not match the fitted rows")
@@ -66,7 +67,8 @@ def _physical(problem: Problem, x: np.ndarray, names) -> dict[str, float]:
 
 def estimate_floor_bias(problem: Problem, chart: Diagram, xs: np.ndarray, records: Sequence[Dataset],
                         lower: np.ndarray, upper: np.ndarray, options: LMOptions,
-                        estimates: Mapping[str, tuple[float, float | None, tuple[float, float] | None]]) -> dict:
+                        estimates: Mapping[str, tuple[float, float | None, tuple[float, float] | None]],
+                        oracle: Sequence[np.ndarray] | None = None) -> dict:
     """RESULT.json's `discretization.bias`: beta per identified parameter, the corrected values and intervals.
 
     Parameters
@@ -75,6 +77,7 @@ def estimate_floor_bias(problem: Problem, chart: Diagram, xs: np.ndarray, record
     xs : ndarray (P,)  the fit's point (per-record values included); records : the training records, in order
     lower, upper, options : the fit's bounds and LM options (the refit runs BIAS_ITER iterations of them)
     estimates : {name: (value, stderr or None, (lo, hi) or None)} of the identified physical parameters
+    oracle : the oracle's runs on `records` when already computed (floor.oracle_runs), else computed here
 
     Returns
     -------
@@ -88,7 +91,7 @@ def estimate_floor_bias(problem: Problem, chart: Diagram, xs: np.ndarray, record
         return {"beta": None, "skipped": "per-record parameters (" + ", ".join(problem.record_params) + "): the "
                 "identified chart holds their mean, and the oracle would run every record at it"}
     try:
-        oracle = _oracle_problem(problem, chart, records)
+        oracle = _oracle_problem(problem, chart, records, oracle)
     except (ValueError, KeyError) as exc:  # the oracle's refusals (e.g. a blow-up) are ValueErrors
         return {"beta": None, "skipped": f"the continuous oracle cannot run this chart: {exc}"}
     if not all(np.all(np.isfinite(s.targets)) for s in oracle.segments):

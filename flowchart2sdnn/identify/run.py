@@ -32,7 +32,7 @@ from ..executors import SerialExecutor
 from ..fit.lm import CONVERGED_STATUSES, LMOptions, LMResult
 from ..fit.multistart import draw_starts, run_multistart
 from .evidence import assess, no_excitation_message, on_bound_warnings, sqrt_domain_warnings, start_stability
-from .floor import floor_warnings, measure_floor
+from .floor import floor_warnings, measure_floor, oracle_runs
 from .floorbias import estimate_floor_bias, floor_bias_warnings
 from .initstate import estimate_initial_state
 from .perrecord import per_record_estimates
@@ -163,13 +163,19 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     if status == "diverged_at_start":
         disc["floor"] = {"rms": None, "skipped": "the fit diverged at its start"}
     else:
-        disc["floor"] = measure_floor(chart, problem.compiled, x, [(d, 0) for d in [train] + more], settings.alignment)
+        records = [train] + more
+        try:  # the floor and the bias both compare with this run: simulate it once
+            oracle = oracle_runs(chart, records, settings.alignment, problem.compiled)
+        except (ValueError, KeyError):  # each reports the oracle's refusal as skipped
+            oracle = None
+        disc["floor"] = measure_floor(chart, problem.compiled, x, [(d, 0) for d in records], settings.alignment,
+                                      oracle)
         warnings.extend(floor_warnings(disc["floor"], fit.train.rms, diagram, problem.network))
         if settings.floor_bias and out.lm is not None and not interrupted and status != "no_excitation":
             free = {n: e for n, e in parameters.items() if not e.fixed and n not in means}
-            disc["bias"] = estimate_floor_bias(problem, chart, xs, [train] + more, lower, upper,
+            disc["bias"] = estimate_floor_bias(problem, chart, xs, records, lower, upper,
                                                lm_options(settings, problem),
-                                               {n: (e.value, e.stderr, e.ci95) for n, e in free.items()})
+                                               {n: (e.value, e.stderr, e.ci95) for n, e in free.items()}, oracle)
             warnings.extend(floor_bias_warnings(disc["bias"], {n: e.stderr for n, e in free.items()}))
             # the reported interval covers the noise and the discretization's shift (ci95_noise keeps the former)
             for n, ci in (disc["bias"].get("widened") or {}).items():
