@@ -347,6 +347,15 @@ class DeadTime:
         return f"n={int(option)}"
 
 
+def _limits(fractions: Sequence[float], scales: Scales, signal: str, unseen: float) -> tuple:
+    """Clip half-ranges to scan: `fractions` of the largest |value| of `signal` seen (``unseen`` where its range
+    is not known); none where that is 0 (a clip of a signal that never moves changes nothing)."""
+    top = max(abs(float(scales.lo.get(signal, -unseen))), abs(float(scales.hi.get(signal, unseen))))
+    if not top > 0:
+        return ()
+    return tuple(round(f * top, 12) for f in fractions)
+
+
 def _clip_blocks(new, signal: str, prefix: str, lim: str, off: str, unit: str | None,
                  description: str) -> tuple[Block, ...]:
     """``lim * sat((signal - off) / lim) + off``: constant, difference, clip, gain and the clipped signal last."""
@@ -377,10 +386,7 @@ class Saturation:
         return input_places(diagram)
 
     def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
-        top = max(abs(float(scales.lo.get(place.at, -1.0))), abs(float(scales.hi.get(place.at, 1.0))))
-        if not top > 0:
-            return ()
-        return tuple(round(f * top, 12) for f in self.fractions)
+        return _limits(self.fractions, scales, place.at, 1.0)
 
     def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
         limit = float(option) if option is not None else 1.0
@@ -421,10 +427,7 @@ class SensorLimit:
         return output_places(diagram)
 
     def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
-        top = max(abs(float(scales.lo.get(place.at, 0.0))), abs(float(scales.hi.get(place.at, 0.0))))
-        if not top > 0:
-            return ()
-        return tuple(round(f * top, 12) for f in self.fractions)
+        return _limits(self.fractions, scales, place.at, 0.0)
 
     def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
         limit = float(option) if option is not None else 1.0
