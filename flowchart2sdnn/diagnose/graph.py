@@ -18,7 +18,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
-from ..diagram.model import Block, Diagram, Parameter, Term
+from ..diagram.model import RESERVED, Block, Diagram, Parameter, Term
 from ..expr import ExprError
 
 __all__ = [
@@ -155,7 +155,7 @@ def output_places(diagram: Diagram) -> tuple[Place, ...]:
 def fresh_name(diagram: Diagram, base: str, taken: set[str] | frozenset[str] = frozenset()) -> str:
     """`base`, or `base_2`, `base_3`, ... : a name no signal or parameter of the chart uses yet."""
     used = set(diagram.block_names) | set(diagram.input_names) | set(diagram.parameter_names) | set(taken)
-    used |= {"pi", "data", "T"}
+    used |= RESERVED
     if base not in used:
         return base
     i = 2

@@ -13,20 +13,19 @@ from __future__ import annotations
 
 from dataclasses import replace
 
-from .model import Diagram, Parameter
+from .model import RESERVED, Diagram, Parameter
 
 __all__ = ["ESTIMATE", "expand_estimated_inits"]
 
 #: the integrator `init` that asks for the start to be fitted
 ESTIMATE = "estimate"
-_RESERVED = frozenset({"pi", "data", "T"})
 
 
 def expand_estimated_inits(diagram: Diagram) -> Diagram:
     """The chart with every ``init: estimate`` integrator started at a new parameter (unchanged when none)."""
     if not any(b.kind == "integrator" and b.init == ESTIMATE for b in diagram.blocks):
         return diagram
-    used = set(diagram.block_names) | set(diagram.input_names) | set(diagram.parameter_names) | _RESERVED
+    used = set(diagram.block_names) | set(diagram.input_names) | set(diagram.parameter_names) | RESERVED
     blocks, parameters = [], list(diagram.parameters)
     for b in diagram.blocks:
         if b.kind == "integrator" and b.init == ESTIMATE:

@@ -16,6 +16,7 @@ if TYPE_CHECKING:  # pragma: no cover
     from ..expr import Expr
 
 __all__ = [
+    "RESERVED",
     "FORMAT_VERSION",
     "MAX_SUBSTEPS",
     "DELAY_RULES",
@@ -34,6 +35,8 @@ FORMAT_VERSION = 1
 #: `substeps` may name at most this many network steps per sample (auto caps far lower, see compiler.substeps)
 MAX_SUBSTEPS = 1000
 #: `delays`: which feedback edges carry the one-step delay (see analysis.loops)
+#: names no block, input or parameter may take (the expression language's pi, `init: data`, the step T)
+RESERVED = frozenset({"pi", "data", "T"})
 DELAY_RULES = ("search", "torques", "midpoint")
 BLOCK_KINDS = ("sum", "gain", "integrator", "delay", "constant", "nonlinear", "function", "product")
 # sat(z) = clip(z, -1, 1); sqrt is signed and regularised within eps of 0 (see FUNCTION_HELP);

@@ -22,6 +22,7 @@ from .model import (
     FORMAT_VERSION,
     FUNCTIONS,
     MAX_SUBSTEPS,
+    RESERVED,
     Block,
     Diagram,
     NonlinearWeights,
@@ -34,7 +35,6 @@ from .yamlload import LocatedYaml, load_yaml, parse_yaml_text
 __all__ = ["load_diagram", "diagram_from_text", "diagram_from_yaml", "TOP_KEYS", "BLOCK_KEYS"]
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
-RESERVED = frozenset({"pi", "data", "T"})
 _YAML11_BOOLS = {"yes": True, "on": True, "no": False, "off": False}
 MAX_NEURONS = 100
 MAX_DELAY = 100_000
