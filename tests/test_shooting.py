@@ -13,6 +13,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from click.testing import CliRunner
+from scipy import sparse
 from scipy.optimize import least_squares
 
 import flowchart2sdnn as sd
@@ -21,6 +22,7 @@ from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
+from flowchart2sdnn.identify import shooting
 from flowchart2sdnn.identify.initstate import state_neurons
 from flowchart2sdnn.identify.problem import build_problem
 from flowchart2sdnn.identify.run import IdentifySettings, identify
@@ -81,7 +83,10 @@ def test_history_sensitivities_match_finite_differences():
     (COULOMB, COULOMB_PLANT, ["w1", "w2"], ("dphi",), 1e-6),
     (LEARNED, LEARNED_PLANT, ["w2"], ("w1", "dphi"), 1e-4),  # steep tanh curves: the differences' own error
 ])
-def test_the_combined_jacobian_matches_central_differences(chart, plant, outputs, free, tol):
+@pytest.mark.parametrize("dense_fraction", [0.25, 2.0])  # the trainer gets J dense / sparse (CSR)
+def test_the_combined_jacobian_matches_central_differences(chart, plant, outputs, free, tol, dense_fraction,
+                                                             monkeypatch):
+    monkeypatch.setattr(shooting, "DENSE_FRACTION", dense_fraction)
     problem = build_problem(load_diagram(chart), _data(plant, 120, 1, outputs))
     seg = Segmented(problem, 25, 3.0)
     assert seg.free_names == free and len(seg.pieces) == 5 and seg.n_x == seg.n_theta + 4 * len(free)
@@ -89,12 +94,25 @@ def test_the_combined_jacobian_matches_central_differences(chart, plant, outputs
     x = seg.start(problem.compiled.theta0() * 1.1)
     x[seg.n_theta:] += 0.01 * rng.standard_normal(seg.n_x - seg.n_theta)
     e, J = seg.fun(x)
+    assert sparse.issparse(J) == (dense_fraction > 1)
+    J = J.toarray() if sparse.issparse(J) else J
     np.testing.assert_array_equal(e, seg.residual(x))
     assert e.size == 119 * len(outputs) + 4 * len(free)  # zoh: row 0 is the initial state
 
     Jfd = _fd(seg.residual, x)
     scale = np.maximum(np.abs(J).max(axis=0), 1e-12)
     assert (np.abs(J - Jfd).max(axis=0) / scale).max() < tol
+
+
+def test_segments_on_threads_give_the_same_residual_and_jacobian():
+    problem = build_problem(load_diagram(COULOMB), _data(COULOMB_PLANT, 400, 4, ["w1", "w2"], noise=0.01))
+    one, two = Segmented(problem, 50, 1.0), Segmented(problem, 50, 1.0, threads=2)
+    x = one.start(problem.compiled.theta0())
+    (e1, J1), (e2, J2) = one.fun(x), two.fun(x)
+    np.testing.assert_array_equal(e1, e2)
+    np.testing.assert_array_equal(J1.toarray() if sparse.issparse(J1) else J1,
+                                  J2.toarray() if sparse.issparse(J2) else J2)
+    np.testing.assert_array_equal(one.residual(x), two.residual(x))
 
 
 def test_our_lm_and_scipy_reach_the_same_multiple_shooting_minimum():

@@ -11,6 +11,11 @@ A trial step is accepted only if it lowers the cost (then ``mu *= mu_dec``); oth
 and the step is recomputed (the schedule of :mod:`.damping`, shared with the quasi-online kernel).  A trial whose simulation diverges (``fun`` returns None, non-finite
 values, or raises FloatingPointError/OverflowError) or that ``guard`` refuses is rejected the same way,
 so the result never holds NaN.
+
+``J`` may be a ``scipy.sparse`` matrix: the multiple-shooting Jacobian (identify.shooting) has a dense block
+for the parameters and, per segment, a block for that segment's free start only; formed densely, its
+products cost 13x a single-shooting iteration at 250 segments (benchmarks/bench_shooting_iteration.py).
+The trainer only forms JᵀJ, Jᵀe and column norms, which sparse products give at the cost of the nonzeros.
 """
 
 from __future__ import annotations
@@ -20,6 +25,7 @@ from collections.abc import Callable, Sequence
 from dataclasses import dataclass, field
 
 import numpy as np
+from scipy import sparse
 from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq
 
 from .damping import TRAINLM_MU0, first_mu, mu_accepted, mu_refused
@@ -138,7 +144,8 @@ class LMResult:
     status, message : str       a key of ``STATUS_MESSAGES`` and a sentence with details
     iterations : int            accepted steps
     cost_history, mu_history : tuple of float, length iterations + 1 (start value, then after each step)
-    jac : ndarray (M, P)        last model Jacobian d yhat / d x at ``x`` (external coordinates)
+    jac : ndarray (M, P)        last model Jacobian d yhat / d x at ``x`` (external coordinates; a CSR
+                                matrix when ``fun`` returns sparse Jacobians)
     residual : ndarray (M,)     e = y - yhat at ``x``
     nfev, njev : int            residual and Jacobian evaluations
     interrupted : bool          True after a KeyboardInterrupt
@@ -230,12 +237,49 @@ def _call_fun(fun, x, n_params, counters) -> tuple[np.ndarray, np.ndarray] | Non
     e = _check_e(e, counters)
     if e is None or J is None:
         return None
-    J = np.array(J, dtype=float)
+    J = sparse.csr_matrix(J, dtype=float) if sparse.issparse(J) else np.array(J, dtype=float)
     if J.shape != (e.size, n_params):
         raise ValueError(f"the Jacobian must have shape (M, P) = ({e.size}, {n_params}), got {J.shape}")
-    if not np.all(np.isfinite(J)) or not math.isfinite(_cost(e)):
+    if not np.all(np.isfinite(J.data if sparse.issparse(J) else J)) or not math.isfinite(_cost(e)):
         return None
     return e, J
+
+
+def _times_columns(J, s: np.ndarray):
+    """J with column j multiplied by s[j] (dense or CSR, as J)."""
+    return J @ sparse.diags(s) if sparse.issparse(J) else J * s
+
+
+def _over_columns(J, s: np.ndarray):
+    """J with column j divided by s[j] (dense or CSR, as J)."""
+    return J @ sparse.diags(1.0 / s) if sparse.issparse(J) else J / s
+
+
+def _gram(J) -> np.ndarray:
+    """JᵀJ, dense."""
+    A = J.T @ J
+    return A.toarray() if sparse.issparse(A) else A
+
+
+def _column_sq_sums(J) -> np.ndarray:
+    if sparse.issparse(J):
+        return np.asarray(J.multiply(J).sum(axis=0)).ravel()
+    return np.einsum("ij,ij->j", J, J)
+
+
+def _column_peaks(J) -> np.ndarray:
+    if sparse.issparse(J):
+        return abs(J).max(axis=0).toarray().ravel() if J.shape[0] else np.zeros(J.shape[1])
+    return np.max(np.abs(J), axis=0, initial=0.0)
+
+
+def _column_norms(J) -> np.ndarray:
+    """Euclidean column norms, computed on columns divided by their peaks (no overflow of the squares)."""
+    peak = _column_peaks(J)
+    safe = np.where(peak > 0, peak, 1.0)
+    if sparse.issparse(J):
+        return np.sqrt(_column_sq_sums(_over_columns(J, safe))) * peak
+    return np.linalg.norm(J / safe, axis=0) * peak
 
 
 def _call_residual(residual, x, counters) -> np.ndarray | None:
@@ -263,12 +307,14 @@ def damped_step(Ju: np.ndarray, e: np.ndarray, A: np.ndarray, g: np.ndarray, mu:
             return du
     except LinAlgError:
         pass
-    aug = np.vstack([Ju, math.sqrt(mu) * np.eye(n)])
+    aug = np.vstack([Ju.toarray() if sparse.issparse(Ju) else Ju, math.sqrt(mu) * np.eye(n)])
     rhs = np.concatenate([e, np.zeros(n)])
     return lstsq(aug, rhs, check_finite=False)[0]
 
 
-def _readonly(a: np.ndarray) -> np.ndarray:
+def _readonly(a):
+    if sparse.issparse(a):  # scipy's sparse matrices have no write flag; the trainer keeps no reference
+        return a
     a = np.array(a, dtype=float)
     a.setflags(write=False)
     return a
@@ -364,7 +410,7 @@ def levenberg_marquardt(
             if point.cost <= opt.cost_goal:
                 status = "cost_goal"
                 break
-            Ju = point.J * bounds.dx_du(point.u)
+            Ju = _times_columns(point.J, bounds.dx_du(point.u))
             g = Ju.T @ point.e  # = -dE/du
             gnorm = float(np.linalg.norm(g))
             if gnorm < opt.min_grad:
@@ -433,12 +479,11 @@ def levenberg_marquardt(
     )
 
 
-def _column_scale(Ju: np.ndarray, previous: np.ndarray | None, groups: tuple[int, ...] = ()) -> np.ndarray:
+def _column_scale(Ju, previous: np.ndarray | None, groups: tuple[int, ...] = ()) -> np.ndarray:
     """Moré's D: the largest column norm of J_u seen so far (never shrinking, so a quantity that once mattered
     keeps its damping when its column fades near a bound); 1 for a column that was always zero."""
     with np.errstate(over="ignore", invalid="ignore"):
-        peak = np.max(np.abs(Ju), axis=0, initial=0.0)
-        norm = np.linalg.norm(Ju / np.where(peak > 0, peak, 1.0), axis=0) * peak
+        norm = _column_norms(Ju)
     norm[~np.isfinite(norm)] = 0.0
     if groups:
         if len(groups) != norm.size:
@@ -457,9 +502,9 @@ def _first_mu(point: _Point, bounds: Bounds, opt: LMOptions) -> float:
         return opt.mu0
     if opt.scale == "jac":  # diag(D⁻¹JᵀJD⁻¹) is 1 at the start
         return float(first_mu(1.0, opt.mu0, opt.tau, opt.mu_max))
-    Ju = point.J * bounds.dx_du(point.u)
+    Ju = _times_columns(point.J, bounds.dx_du(point.u))
     with np.errstate(over="ignore", invalid="ignore"):
-        peak = float(np.max(np.einsum("ij,ij->j", Ju, Ju), initial=0.0))
+        peak = float(np.max(_column_sq_sums(Ju), initial=0.0))
     return float(first_mu(peak, opt.mu0, opt.tau, opt.mu_max))
 
 
@@ -470,20 +515,20 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
     Returns (status or None, accepted point or None, mu, tiny step flag).
     """
     with np.errstate(over="ignore", invalid="ignore"):
-        A = Ju.T @ Ju
+        A = _gram(Ju)
     scale = None
     if col is not None and np.all(np.isfinite(A)) and np.all(np.isfinite(g)):
         scale = np.where(col > 0, col, 1.0)
-        Js = Ju / scale
-        A, gs = Js.T @ Js, Js.T @ point.e
+        Js = _over_columns(Ju, scale)
+        A, gs = _gram(Js), Js.T @ point.e
     elif not np.all(np.isfinite(A)) or not np.all(np.isfinite(g)):
         # J^T J overflows near a divergence: solve with unit-norm columns instead (Marquardt's scaling), which
         # keeps the step finite; trainlm's plain mu*I is used everywhere else
-        scale = np.linalg.norm(Ju / np.max(np.abs(Ju), axis=0, initial=1.0), axis=0) * np.max(
-            np.abs(Ju), axis=0, initial=1.0)
+        with np.errstate(over="ignore", invalid="ignore"):
+            scale = _column_norms(Ju)
         scale[~(scale > 0) | ~np.isfinite(scale)] = 1.0
-        Js = Ju / scale
-        A, gs = Js.T @ Js, Js.T @ point.e
+        Js = _over_columns(Ju, scale)
+        A, gs = _gram(Js), Js.T @ point.e
     x_norm = float(np.linalg.norm(point.x))
     for _ in range(opt.max_mu_tries):
         if scale is None:

@@ -28,9 +28,11 @@ Layer: identify (below it: fit, network).
 
 from __future__ import annotations
 
+from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, replace
 
 import numpy as np
+from scipy import sparse
 
 from ..errors import SdnnError
 from ..fit.lm import LMOptions, LMResult, levenberg_marquardt
@@ -46,6 +48,9 @@ MAX_SEGMENTS = 256
 GROWTH = 4
 #: Continuity weight factor from one stage to the next.
 WEIGHT_GROWTH = 10.0
+#: The Jacobian is handed to the trainer dense when a row's nonzeros (theta's and one start's) are at least
+#: this fraction of its columns (benchmarks/bench_shooting_iteration.py).
+DENSE_FRACTION = 0.25
 #: LM iterations of a multiple-shooting stage at most (and max_iter): a stage only warms the next one up, and on
 #: the Coulomb bench a stage of 2 segments crawled 604 iterations for a 0.01 % lower cost.
 STAGE_MAX_ITER = 100
@@ -75,8 +80,10 @@ class Segmented:
     ``fun``/``residual`` follow Problem's (e = y - yhat, J = d yhat / d x).
     """
 
-    def __init__(self, problem: Problem, length: int, weight: float, scale: np.ndarray | None = None):
+    def __init__(self, problem: Problem, length: int, weight: float, scale: np.ndarray | None = None,
+                 threads: int = 1):
         self.problem = problem
+        self.threads = max(1, int(threads))
         compiled = problem.compiled
         if compiled.estimates_starts:  # the first segment's history would have to carry theta's sensitivity
             raise SdnnError.at("FIT006", "multiple shooting cannot be combined with estimated initial states "
@@ -140,19 +147,25 @@ class Segmented:
         return h
 
     def _runs(self, x: np.ndarray, with_jac: bool):
+        """(piece, outputs and end states, their sensitivities or None) of every segment, in order; on
+        `threads` threads (the kernels release the GIL; each segment's run is independent of the others')."""
         theta = x[:self.n_theta]
         states = self.free if len(self.free) else None
-        for p in self.pieces:
-            seg = self.problem.segments[p.record]
-            with _interruptible():
-                if with_jac:
-                    y, dy = self.problem.compiled.jacobian(theta, seg.inputs[p.a:p.b], history=self.history(x, p),
-                                                           states=states)
-                else:
-                    y = self.problem.compiled.simulate(theta, seg.inputs[p.a:p.b], history=self.history(x, p),
-                                                       states=states)
-                    dy = None
-            yield p, y, dy
+        compiled = self.problem.compiled
+        compiled.connection_values(theta, with_jac)  # evaluated once, before the threads share it
+
+        def run(p: _Piece):
+            inputs, history = self.problem.segments[p.record].inputs[p.a:p.b], self.history(x, p)
+            if with_jac:
+                return p, *compiled.jacobian(theta, inputs, history=history, states=states)
+            return p, compiled.simulate(theta, inputs, history=history, states=states), None
+
+        with _interruptible():
+            if self.threads == 1 or len(self.pieces) == 1:
+                yield from map(run, self.pieces)
+                return
+            with ThreadPoolExecutor(self.threads) as pool:
+                yield from pool.map(run, self.pieces)
 
     def residual(self, x: np.ndarray):
         x = np.asarray(x, dtype=float)
@@ -168,31 +181,43 @@ class Segmented:
         return np.concatenate(es)
 
     def fun(self, x: np.ndarray):
+        """(e, J) with J sparse (CSR): a segment's rows have nonzeros in theta's columns and its own start's;
+        a continuity row in theta's, the previous start's and its own (columns ascending, so the rows are
+        written straight into CSR arrays)."""
         x = np.asarray(x, dtype=float)
         n_out, P, S = self.problem.compiled.n_outputs, self.n_theta, len(self.free)
-        es, blocks, prev = [], [], None
+        es, prev = [], None
+        data, indices, widths = [], [], []
+
+        def rows(values: np.ndarray, columns: np.ndarray) -> None:
+            data.append(values.ravel())
+            indices.append(np.tile(columns, values.shape[0]))
+            widths.append(np.full(values.shape[0], len(columns)))
+
+        theta_cols, none = np.arange(P), np.zeros(0, dtype=np.int64)
         for p, y, dy in self._runs(x, True):
             if not np.all(np.isfinite(y)) or not np.all(np.isfinite(dy)):
                 return None
-            rows = p.b - p.a
+            m = (p.b - p.a) * n_out
             es.append((self.problem.segments[p.record].targets[p.a:p.b] - y[:, :n_out]).ravel())
-            J = np.zeros((rows * n_out, self.n_x))
-            J[:, :P] = dy[:, :n_out, :P].reshape(rows * n_out, P)
-            blocks.append(J)
+            own = np.arange(p.column, p.column + S) if p.column >= 0 else none
+            rows(np.concatenate([dy[:, :n_out, :P].reshape(m, P), dy[:, :n_out, P:P + len(own)].reshape(m, -1)],
+                                axis=1), np.concatenate([theta_cols, own]))
             if p.column >= 0:
-                J[:, p.column:p.column + S] = dy[:, :n_out, P:].reshape(rows * n_out, S)
                 # continuity: weight * (end of the previous segment - this start), its Jacobian
                 end, dend, column = prev
                 es.append(-self.row_weight * (end - x[p.column:p.column + S]))
-                C = np.zeros((S, self.n_x))
-                C[:, :P] = dend[:, :P]
-                if column >= 0:
-                    C[:, column:column + S] = dend[:, P:]
-                C[:, p.column:p.column + S] -= np.eye(S)
-                blocks.append(C * self.row_weight[:, None])
+                before = np.arange(column, column + S) if column >= 0 else none
+                rows(np.concatenate([dend[:, :P], dend[:, P:P + len(before)], -np.eye(S)], axis=1)
+                     * self.row_weight[:, None], np.concatenate([theta_cols, before, own]))
             if S:
                 prev = (y[-1, n_out:], dy[-1, n_out:, :], p.column)
-        return np.concatenate(es), np.vstack(blocks)
+        widths = np.concatenate(widths)
+        indptr = np.concatenate([[0], np.cumsum(widths)])
+        J = sparse.csr_matrix((np.concatenate(data), np.concatenate(indices), indptr), shape=(len(widths), self.n_x))
+        # few segments: J is mostly nonzero, and BLAS on the dense matrix beats sparse products (JᵀJ of 10
+        # segments: 1.4 ms dense, 16 ms sparse)
+        return np.concatenate(es), (J.toarray() if P + S >= DENSE_FRACTION * self.n_x else J)
 
     def start(self, theta: np.ndarray, carried: dict | None = None) -> np.ndarray:
         """x at `theta`: free starts taken from `carried` ({(record, a): states}, an earlier stage), else from
@@ -217,6 +242,10 @@ class Segmented:
         """{(record, a): free start} of x, to carry over to the next stage."""
         S = len(self.free)
         return {(p.record, p.a): np.array(x[p.column:p.column + S]) for p in self.pieces if p.column >= 0}
+
+
+def _dense(a) -> np.ndarray:
+    return a.toarray() if sparse.issparse(a) else np.array(a)
 
 
 def _state_scale(problem: Problem, theta: np.ndarray, free: np.ndarray) -> np.ndarray:
@@ -263,7 +292,7 @@ def shooting_fit(problem: Problem, start: np.ndarray, lower, upper, options: LMO
             if r.status == "diverged_at_start":
                 break
             return replace(r, x=np.array(r.x[:seg.n_theta]), names=tuple(problem.names),
-                           jac=np.array(r.jac[:, :seg.n_theta]), stages=tuple(stages))
+                           jac=_dense(r.jac[:, :seg.n_theta]), stages=tuple(stages))
         theta, carried = np.array(r.x[:seg.n_theta]), seg.starts_of(np.asarray(r.x))
     final = levenberg_marquardt(problem.fun, theta, problem.names, lower, upper, options, callback=callback,
                                 guard=guard, residual=problem.residual)

@@ -261,7 +261,8 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
             emit(s_blk[ix(slot), ix(k)], g, dn2)
 
 
-@numba.njit(cache=True, fastmath=_FAST)
+# nogil: multiple shooting runs its segments' kernels on threads (identify.shooting)
+@numba.njit(cache=True, fastmath=_FAST, nogil=True)
 def simulate_kernel(
     inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, history, ring, record, stride=1
 ):
@@ -290,7 +291,7 @@ def simulate_kernel(
     return out
 
 
-@numba.njit(cache=True, fastmath=_FAST)
+@numba.njit(cache=True, fastmath=_FAST, nogil=True)
 def jacobian_kernel(
     inputs,
     conn_ptr,

@@ -244,7 +244,19 @@ class CompiledNetwork:
 
     def connection_values(self, theta, with_derivatives: bool = False):
         """Every connection's value at `theta` (the flat network's order), and with `with_derivatives` the
-        values of its sparse d(value)/d(theta) entries (the kernels' ``dval``); else None."""
+        values of its sparse d(value)/d(theta) entries (the kernels' ``dval``); else None.
+
+        The last result is kept: multiple shooting runs the kernels once per segment at one theta, and
+        evaluating the chart's expressions each time cost a third of its Jacobian (250 segments)."""
+        key = (np.asarray(theta, dtype=float).tobytes(), with_derivatives)
+        cached = getattr(self, "_last_values", None)
+        if cached is not None and cached[0] == key:
+            return cached[1]
+        out = self._connection_values(theta, with_derivatives)
+        self._last_values = (key, out)
+        return out
+
+    def _connection_values(self, theta, with_derivatives: bool):
         params, weights = self.values(theta)
         coef = np.array([_evaluate(expr, params) for expr in self._exprs])
         wv = coef[self._weight_expr]

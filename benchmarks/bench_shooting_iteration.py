@@ -1,0 +1,99 @@
+"""The cost of one LM iteration with multiple shooting against one with single shooting (issue 14's speed item).
+
+Bench: diagrams/two_mass_coulomb.yaml (its `init`, 20 % off the truth; `substeps: auto`, `delays: torques`) on
+a record of its own plant from `sdnn excite` (continuous RK4, seed 1, 0.01 rad/s noise) of ``--seconds`` (25 s:
+Q = 25 000 samples, the issue's size). Both fits are identify's default LM (``lm_options``) on the same
+problem, run for ``--iterations`` iterations from the chart's `init` with the convergence tests off, so both do
+the same kind of work: one residual and Jacobian (RTRL) per accepted step, one residual per trial, the damped
+normal equations. Single shooting is `Problem.fun`; multiple shooting is the first stage of
+identify.shooting (`Segmented`, continuity weight 1) at each ``--length`` L, its segments on one thread and on
+``--threads``. Printed: seconds per iteration and the ratio to single shooting, measured in the same run (the
+issue asks for at most 1.5 at Q = 25 000).
+
+Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_shooting_iteration.py [--seconds 25] [--length 100 --length
+500 --length 2500] [--iterations 5] [--repeat 3] [--threads 2]``.
+"""
+
+from __future__ import annotations
+
+import os
+
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
+
+import argparse  # noqa: E402
+import dataclasses  # noqa: E402
+import sys  # noqa: E402
+import time  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT))
+
+from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
+from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
+from flowchart2sdnn.fit.lm import levenberg_marquardt  # noqa: E402
+from flowchart2sdnn.identify.problem import build_problem  # noqa: E402
+from flowchart2sdnn.identify.run import lm_options  # noqa: E402
+from flowchart2sdnn.identify.settings import IdentifySettings  # noqa: E402
+from flowchart2sdnn.identify.shooting import Segmented, _state_scale  # noqa: E402
+from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
+
+
+def per_iteration(fun, residual, x0, names, lo, hi, options, repeat: int) -> tuple[float, str]:
+    """The best over `repeat` runs of seconds per LM iteration, and a run's counts."""
+    best, counts = np.inf, ""
+    for _ in range(repeat):
+        t0 = time.perf_counter()
+        r = levenberg_marquardt(fun, x0, names, lo, hi, options, residual=residual)
+        wall = time.perf_counter() - t0
+        best = min(best, wall / max(1, r.iterations))
+        counts = f"{r.iterations} iterations, {r.njev} Jacobians, {r.nfev - r.njev} residuals"
+    return best, counts
+
+
+def main() -> None:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    ap.add_argument("--seconds", type=float, default=25.0)
+    ap.add_argument("--length", type=int, action="append", help="segment lengths L (default 100, 500, 2500)")
+    ap.add_argument("--iterations", type=int, default=5)
+    ap.add_argument("--repeat", type=int, default=3)
+    ap.add_argument("--threads", type=int, default=2, help="also run the segments on this many threads")
+    args = ap.parse_args()
+    lengths = args.length or [100, 500, 2500]
+
+    plant = load_diagram(ROOT / "diagrams" / "two_mass_coulomb_plant.yaml")
+    chart = load_diagram(ROOT / "diagrams" / "two_mass_coulomb.yaml")
+    frame = excite(plant, ExcitationSettings(seconds=args.seconds, seed=1, noise_std=0.01))
+    data = dataset_from_frame(frame, time="time", inputs=list(plant.input_names), outputs=list(plant.output_names))
+    problem = build_problem(chart, data, seed=1)
+    theta0 = problem.compiled.theta0()
+    lo, hi = problem.bounds()
+    # no convergence test may end a run early: each must do `iterations` iterations
+    options = dataclasses.replace(lm_options(IdentifySettings(seed=1), problem), max_iter=args.iterations,
+                                  stall_decrease=0.0, min_grad=0.0, min_rel_step=0.0,
+                                  min_rel_cost_change=0.0)
+    problem.fun(theta0)  # numba compiles once, outside the timings
+
+    q = len(problem.segments[0].inputs)
+    print(f"two_mass_coulomb, Q = {q} samples ({problem.compiled.substeps} network steps per sample), "
+          f"{args.iterations} LM iterations per run, best of {args.repeat}")
+    base, counts = per_iteration(problem.fun, problem.residual, theta0, problem.names, lo, hi, options, args.repeat)
+    print(f"{'single shooting':>32}: {base * 1e3:8.1f} ms per iteration   ratio 1.00   ({counts})")
+    for L, threads in [(L, t) for L in lengths for t in (1, args.threads) if t == 1 or args.threads > 1]:
+        seg = Segmented(problem, L, 1.0, threads=threads)
+        seg.scale = _state_scale(problem, theta0, seg.free)
+        seg.row_weight = seg.weight * np.sqrt(seg.length) / seg.scale
+        x0 = seg.start(theta0)
+        free = seg.n_x - seg.n_theta
+        opts = dataclasses.replace(options, scale_groups=seg.scale_groups(options.scale_groups))
+        t, counts = per_iteration(seg.fun, seg.residual, x0, seg.names,
+                               np.concatenate([lo, np.full(free, -np.inf)]),
+                               np.concatenate([hi, np.full(free, np.inf)]), opts, args.repeat)
+        print(f"{f'L = {L} ({len(seg.pieces)} segments), {threads} thr.':>32}: {t * 1e3:8.1f} ms per iteration   "
+              f"ratio {t / base:.2f}   ({counts})")
+
+
+if __name__ == "__main__":
+    main()
