@@ -55,6 +55,7 @@ from .graph import (
     add_terms,
     fresh_name,
     input_places,
+    namer,
     output_places,
     rename_block,
     reroute,
@@ -145,16 +146,7 @@ def _curve(name: str, at: str, slopes: Sequence[float], scale: float, bias: bool
                  weights=NonlinearWeights(a, (0.0,) * len(a), (0.0,) * len(a) if bias else None))
 
 
-def _namer(diagram: Diagram):
-    """A function giving fresh names for new blocks and parameters, distinct from the chart's and each other."""
-    taken: set[str] = set()
-
-    def new(base: str) -> str:
-        n = fresh_name(diagram, base, taken)
-        taken.add(n)
-        return n
-
-    return new
+_namer = namer  # fresh names for a patch's new blocks and parameters
 
 
 # ------------------------------------------------------------------------------------------------ effects

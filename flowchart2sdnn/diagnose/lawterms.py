@@ -19,23 +19,12 @@ from dataclasses import dataclass
 
 from ..diagram.model import Block, Diagram, Parameter, Term
 from ..expr import parse_expr
-from .graph import Place, add_blocks, consumers, fresh_name, input_places, reroute
+from .graph import Place, add_blocks, consumers, input_places, namer, reroute
 
 __all__ = ["LinearTerm", "InputOffset", "POWER_LAWS"]
 
 #: functions whose law ``k f(x)`` a linear term ``c x`` widens
 POWER_LAWS = ("sqrt", "square", "signed_square")
-
-
-def _namer(diagram: Diagram):
-    taken: set[str] = set()
-
-    def new(base: str) -> str:
-        n = fresh_name(diagram, base, taken)
-        taken.add(n)
-        return n
-
-    return new
 
 
 @dataclass(frozen=True)
@@ -55,7 +44,7 @@ class LinearTerm:
 
     def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
         r, x = place.at, place.via
-        new = _namer(diagram)
+        new = namer(diagram)
         c = new(f"{r}_lin")
         law = diagram.block(r)
         gains = [g for g in consumers(diagram, r) if g.kind == "gain"]
@@ -95,7 +84,7 @@ class InputOffset:
 
     def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
         u = place.at
-        new = _namer(diagram)
+        new = namer(diagram)
         off, const, phys = new(f"{u}_zero"), new(f"{u}_zeroc"), new(f"{u}_phys")
         unit = next((s.unit for s in diagram.inputs if s.name == u), None)
         p = Parameter(off, 0.0, unit=unit, description=f"zero offset of the input {u}: the physics reads {u} + this "
