@@ -1,6 +1,7 @@
 """The linear_term and input_offset effects (flowchart2sdnn.diagnose.lawterms): the patched chart against
 scipy's solution of the ODE it should be, neutral at its start values, offered where it belongs, and
-linear_term found by diagnose on a virtual bench whose lower tank drains with a laminar share."""
+linear_term and input_offset found by diagnose on virtual benches (a laminar share of the lower outflow, a pump
+that delivers only above 0.3 V)."""
 
 from __future__ import annotations
 
@@ -87,3 +88,19 @@ def test_diagnose_finds_the_laminar_share_of_the_lower_outflow():
     assert p["r2_lin"] == pytest.approx(0.1, rel=0.1)
     for name, truth in (("k1", 0.5), ("k3", 0.4), ("k4", 1.0)):
         assert p[name] == pytest.approx(truth, rel=0.08)
+
+
+def test_diagnose_finds_the_pump_zero():
+    """Bench: the pump delivers k4 (u - 0.3); the chart's pump k4 u. Measured: u_zero -0.3000, k1 -2.5 %, k3 and
+    k4 +1.1 %, validation RMS 0.640 -> 0.025 (noise 0.01)."""
+    plant = chart("tanks_pump_zero_plant")
+    settings = {"amplitude": (0.0, 2.0), "hold": (20.0, 80.0), "relay_level": 0.0}
+    train, val = record(plant, 1200.0, 1, 0.01, **settings), record(plant, 600.0, 2, 0.01, **settings)
+    r = diagnose(chart("tanks"), train, [val], DiagnoseSettings(rounds=1)).report
+    first = r["rounds"][0]
+    assert first["accepted"] and (first["effect"], first["at"]) == ("input_offset", "u"), first
+    assert first["validation_rms_after"] < first["validation_rms_before"] / 10
+    p = {k: v["value"] for k, v in r["final"]["parameters"].items()}
+    assert p["u_zero"] == pytest.approx(-0.3, rel=0.05)
+    for name, truth in (("k1", 0.5), ("k3", 0.4), ("k4", 1.0)):
+        assert p[name] == pytest.approx(truth, rel=0.05)
