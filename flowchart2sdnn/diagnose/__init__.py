@@ -13,7 +13,8 @@ import importlib
 # cli.diagnose to register the command) does not pay for numba and scipy.
 _WHERE = {
     **dict.fromkeys(("BUILTIN_EFFECTS", "Backlash", "Cogging", "Damping", "DeadTime", "DeadZone", "Effect",
-                     "Friction", "Saturation", "Scales", "SensorLimit", "SensorOffset"), "effects"),
+                     "Friction", "InputOffset", "LinearTerm", "Saturation", "Scales", "SensorLimit",
+                     "SensorOffset"), "effects"),
     "Place": "graph",
     **dict.fromkeys(("DiagnoseSettings", "Diagnosis", "Fitted", "diagnose"), "loop"),
     **dict.fromkeys(("Candidate", "Score", "Screen", "gauss_newton_decrease", "screen"), "score"),
@@ -41,6 +42,8 @@ __all__ = [
     "Effect",
     "Fitted",
     "Friction",
+    "InputOffset",
+    "LinearTerm",
     "Place",
     "Saturation",
     "Scales",

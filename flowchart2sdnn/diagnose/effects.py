@@ -33,6 +33,9 @@ cogging        speed               phi = integral(speed); A sin(p phi) + B cos(p
                                    (p with a period beyond 2 RMS of a position the chart has: not offered)
 overflow       integrator state    x' = f - K relu(x - L): x held at a learned level L (or above a lower one),
                                    the excess lost or routed into a downstream integrator (:mod:`.overflow`)
+input_offset   input               the physics reads u + o (o = 0): an input's zero offset (:mod:`.lawterms`)
+linear_term    power law f(x)      k*f(x) becomes k*f(x) + c*x (c = 0), f = sqrt, square, signed_square: a
+                                   Torricelli outflow's laminar share, a drag's viscous share (:mod:`.lawterms`)
 =============  ==================  =====================================================================
 """
 
@@ -52,6 +55,7 @@ from .graph import (
     add_terms,
     fresh_name,
     input_places,
+    namer,
     output_places,
     rename_block,
     reroute,
@@ -59,6 +63,7 @@ from .graph import (
     speeds,
     spring_angles,
 )
+from .lawterms import InputOffset, LinearTerm
 from .overflow import Overflow
 
 __all__ = [
@@ -76,6 +81,8 @@ __all__ = [
     "DeadZone",
     "Cogging",
     "Overflow",
+    "LinearTerm",
+    "InputOffset",
     "BUILTIN_EFFECTS",
     "builtin_effects",
     "effect_library",
@@ -139,16 +146,7 @@ def _curve(name: str, at: str, slopes: Sequence[float], scale: float, bias: bool
                  weights=NonlinearWeights(a, (0.0,) * len(a), (0.0,) * len(a) if bias else None))
 
 
-def _namer(diagram: Diagram):
-    """A function giving fresh names for new blocks and parameters, distinct from the chart's and each other."""
-    taken: set[str] = set()
-
-    def new(base: str) -> str:
-        n = fresh_name(diagram, base, taken)
-        taken.add(n)
-        return n
-
-    return new
+_namer = namer  # fresh names for a patch's new blocks and parameters
 
 
 # ------------------------------------------------------------------------------------------------ effects
@@ -634,7 +632,7 @@ class Cogging:
 # ------------------------------------------------------------------------------------------------ registry
 BUILTIN_EFFECTS: dict[str, Effect] = {
     e.name: e for e in (Friction(), Damping(), DeadTime(), Saturation(), Backlash(), DeadZone(), Cogging(),
-                        Overflow(), SensorLimit(), SensorOffset())
+                        Overflow(), SensorLimit(), SensorOffset(), InputOffset(), LinearTerm())
 }
 
 

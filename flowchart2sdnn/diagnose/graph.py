@@ -28,6 +28,7 @@ __all__ = [
     "spring_angles",
     "input_places",
     "fresh_name",
+    "namer",
     "add_terms",
     "reroute",
     "add_blocks",
@@ -162,6 +163,18 @@ def fresh_name(diagram: Diagram, base: str, taken: set[str] | frozenset[str] = f
     while f"{base}_{i}" in used:
         i += 1
     return f"{base}_{i}"
+
+
+def namer(diagram: Diagram):
+    """A function giving fresh names for new blocks and parameters, distinct from the chart's and each other."""
+    taken: set[str] = set()
+
+    def new(base: str) -> str:
+        n = fresh_name(diagram, base, taken)
+        taken.add(n)
+        return n
+
+    return new
 
 
 def add_blocks(diagram: Diagram, blocks: tuple[Block, ...] | list[Block],
