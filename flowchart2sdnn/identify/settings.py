@@ -71,9 +71,11 @@ class IdentifySettings:
                              (see :data:`CONVERGED_DECREASE`); 0 runs to ``max_iter``
     init_window : int        > 0: the validation record's initial state is fitted on its first init_window
                              samples (parameters fixed), the free run scored from that row on (identify.initstate)
-    shooting : "off" or int  an int L >= 2: multiple shooting first, segments of L samples merged (x4) until single
-                             shooting over whole records, whose fit is the result (identify.shooting); "off": single
-                             shooting only
+    shooting : "off", "auto" or int  an int L >= 2: multiple shooting first, segments of L samples merged (x4)
+                             until single shooting over whole records, whose fit is the result (identify.shooting;
+                             a merge that raises the cost per sample more than MERGE_RISE is refused and the
+                             stage before is the result); "off": single shooting only; "auto": L or off chosen
+                             from how fast a moved start grows along the records (identify.shootauto)
     floor_bias : bool        estimate the discretization's bias beta on each parameter by refitting the network to
                              the continuous oracle's run of the identified chart (identify.floorbias) and widen
                              ci95 by |beta| (see :data:`FLOOR_BIAS`); offline fits only (quasi-online skips it)
@@ -113,9 +115,9 @@ class IdentifySettings:
         _need(not (self.init_window and self.split is not None),
               "init_window applies to a separate validation record, not to split (the validation part of a split "
               "continues the training run's state)")
-        _need(self.shooting == "off" or (isinstance(self.shooting, int) and not isinstance(self.shooting, bool)
+        _need(self.shooting in ("off", "auto") or (isinstance(self.shooting, int) and not isinstance(self.shooting, bool)
                                           and self.shooting >= 2),
-              f"shooting must be 'off' or a segment length of at least 2 samples, got {self.shooting!r}")
+              f"shooting must be 'off', 'auto' or a segment length of at least 2 samples, got {self.shooting!r}")
         _need(not (self.online and self.shooting != "off"),
               "shooting applies to offline fits, not to the quasi-online window")
         _need(self.lm_scale in ("jac", "none"), f"lm_scale must be 'jac' or 'none', got {self.lm_scale!r}")
