@@ -130,7 +130,7 @@ def test_stage_lengths():
     assert stage_lengths(500, 400) == []  # one segment per record: single shooting only
 
 
-@pytest.mark.parametrize("value", [1, 0, True, "Auto", "10", 2.5]  # "auto" is a value (identify.shootauto))
+@pytest.mark.parametrize("value", [1, 0, True, "Auto", "10", 2.5])  # "auto" itself is a value (shootauto)
 def test_bad_settings_are_refused(value):
     with pytest.raises(ValueError, match="shooting must be"):
         IdentifySettings(shooting=value)
