@@ -111,3 +111,27 @@ def test_a_smooth_record_ends_in_single_shooting():
     assert shooting["stages"][-1].get("kept") and not any(s.get("refused") for s in shooting["stages"])
     assert not any("does not follow" in w for w in res.warnings)
     assert res.parameters["b"].value == pytest.approx(0.5, rel=0.03)
+
+
+def test_cli_auto_writes_its_choice_and_refuses_a_bad_value(tmp_path):
+    from click.testing import CliRunner
+
+    from flowchart2sdnn.cli import main
+
+    chart, data = _pendulum(0.2)
+    csv = tmp_path / "p.csv"
+    c = data.columns
+    csv.write_text("time,u,v,theta\n" + "\n".join(
+        f"{k * 0.1:.4f},{float(u)!r},{float(v)!r},{float(th)!r}"
+        for k, (u, v, th) in enumerate(zip(c["u"], c["v"], c["theta"], strict=True))))
+    out = tmp_path / "r.json"
+    r = CliRunner().invoke(main, ["identify", str(csv), "--diagram", str(PENDULUM), "-o", str(out),
+                                  "--shooting", "auto", "--no-floor-bias"])
+    assert r.exit_code == 0, r.output
+    import json
+
+    shooting = json.loads(out.read_text())["shooting"]
+    assert shooting["requested"] == "auto" and shooting["auto"]["chose"] == "off"
+    bad = CliRunner().invoke(main, ["identify", str(csv), "--diagram", str(PENDULUM), "--shooting", "sometimes"])
+    assert bad.exit_code == 2 and "'off', 'auto' or a segment length" in bad.output
+
