@@ -103,7 +103,9 @@ def test_a_chaotic_record_keeps_a_segmented_stage_and_says_so():
     res = identify(chart, data, settings=IdentifySettings(shooting=25, floor_bias=False))
     shooting = res.extra["shooting"]
     assert shooting["predictable"] is False and shooting["final_length"] == 25
-    assert shooting["stages"][1].get("refused") and len(shooting["stages"]) == 2  # nothing longer was tried
+    # every longer stage, single shooting included, was tried from the kept one and refused
+    assert shooting["stages"][0].get("kept") and all(s.get("refused") for s in shooting["stages"][1:])
+    assert [s["length"] for s in shooting["stages"]] == [25, 100, 400, data.n_rows - 1]
     assert any("does not follow the whole records" in w for w in res.warnings)
     # the parameters come from the segmented stage, and it found the pendulum
     assert res.parameters["b"].value == pytest.approx(0.5, rel=0.02)

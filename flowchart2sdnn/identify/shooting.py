@@ -30,7 +30,11 @@ the longer stages then climb far above the shorter ones' cost. A merge is refuse
   short segments by more than the noise, and its cost grows with the horizon too; merging it must go on to
   single shooting, where the missing effect shows, as before this rule.
 
-The stage before is then the last, its parameters are the result, and nothing longer is tried. A smooth,
+A refused stage is passed over: the next length starts again from the last accepted stage (its parameters
+and free starts), so one stage whose fit went astray (cogging bench, auto's L = 1421: the 5684-sample stage
+ended at its 100-iteration limit 175 times costlier, yet single shooting from the 1421 stage follows the
+whole record) does not end the merging. When single shooting too is refused, the last accepted stage is the
+result: its parameters, its segment length reported. A smooth,
 correct chart's stages all end near the noise floor and later stages cost the same or less (cogging bench,
 30 s, L = 200: 6.5, 5.0, 4.1, 4.4 then 3.1 for single shooting), so nothing is refused. The result then says so (its stages' `kept`, RESULT.json `shooting.final_length`
 and a warning): validation of such a fit is meaningful on horizons up to that length only.
@@ -319,8 +323,9 @@ def shooting_fit(problem: Problem, start: np.ndarray, lower, upper, options: LMO
             if r.status == "diverged_at_start":
                 break
             return replace(own, stages=tuple(stages))
-        if before is not None and before[0] <= floor and not per <= MERGE_RISE * before[0]:
-            return _refused(before[1], stages)
+        if _refuse(before, per, floor):  # the next stage starts again from the accepted one
+            stages[-1]["refused"] = True
+            continue
         before = (per, (own, i))
         theta, carried = np.array(r.x[:seg.n_theta]), seg.starts_of(np.asarray(r.x))
     final = levenberg_marquardt(problem.fun, theta, problem.names, lower, upper, options, callback=callback,
@@ -329,18 +334,18 @@ def shooting_fit(problem: Problem, start: np.ndarray, lower, upper, options: LMO
     stages.append({"length": longest, "segments": len(problem.segments), "free_states": 0, "weight": None,
                    "iterations": final.iterations, "cost": final.cost, "status": final.status,
                    "cost_per_sample": per})
-    if before is not None and before[0] <= floor and not final.interrupted and not per <= MERGE_RISE * before[0]:
-        return _refused(before[1], stages)
+    if not final.interrupted and _refuse(before, per, floor):
+        stages[-1]["refused"] = True
+        result, index = before[1]
+        stages[index]["kept"] = True
+        return replace(result, stages=tuple(stages))
     stages[-1]["kept"] = True
     return replace(final, stages=tuple(stages))
 
 
-def _refused(kept: tuple, stages: list) -> LMResult:
-    """The result when the last merge was refused: the stage before it, marked `kept` (and the refused one)."""
-    result, index = kept
-    stages[index]["kept"] = True
-    stages[-1]["refused"] = True
-    return replace(result, stages=tuple(stages))
+def _refuse(before: tuple | None, per: float, floor: float) -> bool:
+    """Whether a stage of output cost per sample `per` is refused after the accepted stage `before`."""
+    return before is not None and before[0] <= floor and not per <= MERGE_RISE * before[0]
 
 
 def kept_stage(stages) -> dict | None:
