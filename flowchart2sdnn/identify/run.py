@@ -119,9 +119,9 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     warnings += on_bound_warnings(problem.names, x0, lower, upper)
 
     auto = None
-    if settings.shooting == "auto" and problem.names and not settings.online:
-        auto = choose_shooting(problem, x0)
-        settings = replace(settings, shooting=auto.length or "off")
+    if settings.shooting == "auto":  # the rule reads the records (identify.shootauto); the window has no shooting
+        auto = choose_shooting(problem, x0) if problem.names and not settings.online else None
+        settings = replace(settings, shooting=auto.length or "off" if auto is not None else "off")
     if not problem.names:
         out = _Outcome(x0, "nothing_to_fit", "every parameter and curve is fixed; only the fit was evaluated", False)
     elif settings.online:

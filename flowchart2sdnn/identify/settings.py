@@ -118,7 +118,7 @@ class IdentifySettings:
         _need(self.shooting in ("off", "auto") or (isinstance(self.shooting, int) and not isinstance(self.shooting, bool)
                                           and self.shooting >= 2),
               f"shooting must be 'off', 'auto' or a segment length of at least 2 samples, got {self.shooting!r}")
-        _need(not (self.online and self.shooting != "off"),
+        _need(not (self.online and self.shooting not in ("off", "auto")),  # auto: off for the window
               "shooting applies to offline fits, not to the quasi-online window")
         _need(self.lm_scale in ("jac", "none"), f"lm_scale must be 'jac' or 'none', got {self.lm_scale!r}")
         _need(self.lm_tau >= 0 and math.isfinite(self.lm_tau), f"lm_tau must be a finite number >= 0, got {self.lm_tau}")
