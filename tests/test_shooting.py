@@ -122,7 +122,10 @@ def test_identify_with_shooting_finds_the_plant_and_ends_in_single_shooting():
     truth = {p.name: p.init for p in load_diagram(COULOMB_PLANT).parameters}
     for name in ("J2", "c"):
         assert r.parameters[name].value == pytest.approx(truth[name], rel=0.02)
-    assert "shooting" not in identify(chart, data, max_iter=3).extra  # off by default: no new key
+    assert "shooting" not in identify(chart, data, max_iter=3, shooting="off").extra  # off: no new key
+    # the default is auto, which leaves this stable chart single shooting (a moved start decays) and says so
+    auto = identify(chart, data, max_iter=3).extra["shooting"]
+    assert auto["requested"] == "auto" and auto["auto"]["chose"] == "off" and auto["stages"] == []
 
 
 def test_stage_lengths():

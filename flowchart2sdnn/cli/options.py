@@ -236,10 +236,11 @@ def _shooting(value: str):
     return length
 
 
-def shooting_option(what: str = "the fit"):
-    """``--shooting off|auto|L`` (identify, diagnose, batch): multiple shooting for `what`."""
+def shooting_option(what: str = "the fit", default: str = "auto"):
+    """``--shooting off|auto|L`` (identify, diagnose, batch): multiple shooting for `what`; identify and batch
+    default to auto, diagnose to off (its benches and acceptance were measured single shooting)."""
     return click.option(
-        "--shooting", default="off", show_default=True, callback=lambda ctx, param, v: _shooting(v),
+        "--shooting", default=default, show_default=True, callback=lambda ctx, param, v: _shooting(v),
         help=f"Multiple shooting for {what}: 'off'; L: the records cut into segments of L samples (unmeasured "
              "integrator states free at each segment start), merged x4 per stage until single shooting over "
              "whole records, whose fit is the result (a merge that raises the cost per sample by more than "

@@ -222,7 +222,8 @@ def _shooting(settings: IdentifySettings, lm: LMResult | None, auto=None) -> dic
     """RESULT.json's `shooting`: the segment length used (`auto`: what the rule chose and why), the best start's
     stages, and which stage's fit is the result (`final_length`; `predictable` false when a merge was refused:
     a chaotic record, validated on short horizons only; identify.shooting)."""
-    stages = [dict(s) for s in lm.stages] if lm is not None else []
+    stages = [{k: None if isinstance(v, float) and not np.isfinite(v) else v for k, v in s.items()}
+              for s in lm.stages] if lm is not None else []  # a diverged stage's cost is inf: JSON has no inf
     out = {"length": settings.shooting, "requested": "auto" if auto is not None else settings.shooting,
            **({"auto": auto.to_dict()} if auto is not None else {}), "stages": stages,
            "method": "multiple shooting, segments merged x4, continuity weight x10 per stage, then single "
@@ -235,11 +236,17 @@ def _shooting(settings: IdentifySettings, lm: LMResult | None, auto=None) -> dic
         if not out["predictable"]:
             out["note"] = (f"multiple shooting: a free run of the fitted chart does not follow the whole records "
                            f"(merging segments of {kept['length']} samples raised the cost per sample "
-                           f"{stages[-1]['cost_per_sample'] / kept['cost_per_sample']:.3g}x); the parameters come "
+                           f"{_rise(stages[-1], kept)}); the parameters come "
                            f"from the stage with segments of {kept['length']} samples, and the fit is "
                            f"validated on horizons of up to {kept['length']} samples only (the training and "
                            f"validation RMS of whole-record free runs are not its measure)")
     return out
+
+
+def _rise(stage: dict, kept: dict) -> str:
+    """How much costlier per sample the whole-record stage was than the kept one (for the note)."""
+    a, b = stage.get("cost_per_sample"), kept.get("cost_per_sample")
+    return f"{a / b:.3g}x" if a is not None and b else "beyond floating point: it diverged"
 
 
 def _resolved(chart, network):

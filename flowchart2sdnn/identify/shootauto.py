@@ -58,7 +58,7 @@ class ShootingChoice:
 
     def to_dict(self) -> dict:
         return {"chose": self.length if self.length is not None else "off", "horizon_samples": self.horizon,
-                "peak_amplification": self.peak, "growth_bound": GROWTH_BOUND, "longest_record": self.longest,
+                "peak_amplification": self.peak if np.isfinite(self.peak) else None,  # None: it overflowed "growth_bound": GROWTH_BOUND, "longest_record": self.longest,
                 "reason": self.reason}
 
 

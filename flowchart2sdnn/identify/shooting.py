@@ -316,7 +316,7 @@ def shooting_fit(problem: Problem, start: np.ndarray, lower, upper, options: LMO
         per = seg.output_cost(r.x) / max(1, m)
         stages.append({"length": L, "segments": len(seg.pieces), "free_states": int(free),
                        "weight": seg.weight, "iterations": r.iterations, "cost": r.cost, "status": r.status,
-                       "cost_per_sample": per})
+                       "cost_per_sample": per if np.isfinite(per) else None})
         own = replace(r, x=np.array(r.x[:seg.n_theta]), names=tuple(problem.names),
                       jac=np.array(r.jac[:, :seg.n_theta]))
         if r.interrupted or r.status in ("callback_stop", "diverged_at_start"):
@@ -333,7 +333,7 @@ def shooting_fit(problem: Problem, start: np.ndarray, lower, upper, options: LMO
     per = final.cost / max(1, m)
     stages.append({"length": longest, "segments": len(problem.segments), "free_states": 0, "weight": None,
                    "iterations": final.iterations, "cost": final.cost, "status": final.status,
-                   "cost_per_sample": per})
+                   "cost_per_sample": per if np.isfinite(per) else None})
     if not final.interrupted and _refuse(before, per, floor):
         stages[-1]["refused"] = True
         result, index = before[1]
