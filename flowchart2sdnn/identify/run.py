@@ -227,8 +227,9 @@ def _shooting(settings: IdentifySettings, lm: LMResult | None, auto=None) -> dic
     out = {"length": settings.shooting, "requested": "auto" if auto is not None else settings.shooting,
            **({"auto": auto.to_dict()} if auto is not None else {}), "stages": stages,
            "method": "multiple shooting, segments merged x4, continuity weight x10 per stage, then single "
-                     "shooting over whole records (the result, unless a merge raised the output cost per "
-                     "sample by more than 1.44x: then the stage before it)"}
+                     "shooting over whole records (the result, unless it costs more than 1.44x per sample than "
+                     "the last accepted stage while that stage is within 2x the noise: then that stage; a "
+                     "stage refused so is passed over)"}
     kept = kept_stage(stages)
     if kept is not None:
         out["final_length"] = kept["length"]
