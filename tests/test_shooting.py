@@ -140,7 +140,10 @@ def test_identify_with_shooting_finds_the_plant_and_ends_in_single_shooting():
     truth = {p.name: p.init for p in load_diagram(COULOMB_PLANT).parameters}
     for name in ("J2", "c"):
         assert r.parameters[name].value == pytest.approx(truth[name], rel=0.02)
-    assert "shooting" not in identify(chart, data, max_iter=3).extra  # off by default: no new key
+    assert "shooting" not in identify(chart, data, max_iter=3, shooting="off").extra  # off: no new key
+    # the default is auto, which leaves this stable chart single shooting (a moved start decays) and says so
+    auto = identify(chart, data, max_iter=3).extra["shooting"]
+    assert auto["requested"] == "auto" and auto["auto"]["chose"] == "off" and auto["stages"] == []
 
 
 def test_stage_lengths():
@@ -148,7 +151,7 @@ def test_stage_lengths():
     assert stage_lengths(500, 400) == []  # one segment per record: single shooting only
 
 
-@pytest.mark.parametrize("value", [1, 0, True, "auto", "10", 2.5])
+@pytest.mark.parametrize("value", [1, 0, True, "Auto", "10", 2.5])  # "auto" itself is a value (shootauto)
 def test_bad_settings_are_refused(value):
     with pytest.raises(ValueError, match="shooting must be"):
         IdentifySettings(shooting=value)

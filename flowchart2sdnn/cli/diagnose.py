@@ -95,7 +95,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 @click.option("--init-window", type=click.IntRange(min=1), default=None,
               help="Fit each --validate record's initial state on its first N samples (parameters fixed) and score "
                    "it from sample N on (the public benchmarks' protocol).")
-@shooting_option("the full fits (the chart as given; the brief refits stay single shooting)")
+@shooting_option("the full fits (the chart as given; the brief refits stay single shooting)", default="off")
 @click.option("--allow-unconverged", is_flag=True,
               help="Trace even when the first fit of the chart as given did not converge (default: refuse).")
 @alignment_option()

@@ -224,25 +224,28 @@ class _Substeps(click.ParamType):
 
 
 def _shooting(value: str):
-    """--shooting: 'off' or a whole number of samples >= 2 (a bad value exits 2 with one line)."""
-    if value == "off":
+    """--shooting: 'off', 'auto' or a whole number of samples >= 2 (a bad value exits 2 with one line)."""
+    if value in ("off", "auto"):
         return value
     try:
         length = int(value)
     except ValueError:
         length = 0
     if length < 2:
-        raise click.BadParameter(f"expected 'off' or a segment length of at least 2 samples, got {value!r}")
+        raise click.BadParameter(f"expected 'off', 'auto' or a segment length of at least 2 samples, got {value!r}")
     return length
 
 
-def shooting_option(what: str = "the fit"):
-    """``--shooting off|L`` (identify, diagnose, batch): multiple shooting for `what`."""
+def shooting_option(what: str = "the fit", default: str = "auto"):
+    """``--shooting off|auto|L`` (identify, diagnose, batch): multiple shooting for `what`; identify and batch
+    default to auto, diagnose to off (its benches and acceptance were measured single shooting)."""
     return click.option(
-        "--shooting", default="off", show_default=True, callback=lambda ctx, param, v: _shooting(v),
-        help=f"Multiple shooting for {what}: 'off', or L: the records cut into segments of L samples (unmeasured "
+        "--shooting", default=default, show_default=True, callback=lambda ctx, param, v: _shooting(v),
+        help=f"Multiple shooting for {what}: 'off'; L: the records cut into segments of L samples (unmeasured "
              "integrator states free at each segment start), merged x4 per stage until single shooting over "
-             "whole records, whose fit is the result.")
+             "whole records, whose fit is the result (a merge that raises the cost per sample by more than "
+             "44 % is refused: the stage before is the result); 'auto': L, or off, from how fast a moved "
+             "start grows along the records.")
 
 
 def substeps_option():

@@ -98,9 +98,9 @@ class DiagnoseSettings:
             raise ValueError("split must lie strictly between 0 and 1")
         if not (isinstance(self.init_window, int) and self.init_window >= 0):
             raise ValueError(f"init_window must be a whole number >= 0, got {self.init_window!r}")
-        if not (self.shooting == "off" or (isinstance(self.shooting, int) and not isinstance(self.shooting, bool)
+        if not (self.shooting in ("off", "auto") or (isinstance(self.shooting, int) and not isinstance(self.shooting, bool)
                                            and self.shooting >= 2)):
-            raise ValueError(f"shooting must be 'off' or a segment length of at least 2 samples, got {self.shooting!r}")
+            raise ValueError(f"shooting must be 'off', 'auto' or a segment length of at least 2 samples, got {self.shooting!r}")
         if self.init_window and self.split is not None:
             raise ValueError("init_window applies to separate validation records, not to a split")
 

@@ -51,6 +51,8 @@ from .result import (
     RecordInfo,
 )
 from .settings import MIN_REL_COST_CHANGE, IdentifySettings
+from .shootauto import choose_shooting
+from .shooting import kept_stage
 from .workers import fit_start, fit_task, quasi_online_start, run_quasi_online_start, run_start
 
 __all__ = ["IdentifySettings", "Identification", "identify", "lm_options"]
@@ -116,6 +118,10 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     lower, upper = problem.bounds()
     warnings += on_bound_warnings(problem.names, x0, lower, upper)
 
+    auto = None
+    if settings.shooting == "auto":  # the rule reads the records (identify.shootauto); the window has no shooting
+        auto = choose_shooting(problem, x0) if problem.names and not settings.online else None
+        settings = replace(settings, shooting=auto.length or "off" if auto is not None else "off")
     if not problem.names:
         out = _Outcome(x0, "nothing_to_fit", "every parameter and curve is fixed; only the fit was evaluated", False)
     elif settings.online:
@@ -124,6 +130,9 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         out = _offline(problem, x0, lower, upper, settings, progress, stop, executor)
     if out.multistart_warning:
         warnings.append(out.multistart_warning)
+    shooting = _shooting(settings, out.lm, auto) if settings.shooting != "off" or auto is not None else None
+    if shooting and shooting.get("predictable") is False:
+        warnings.append(shooting["note"])
     x, status, message, interrupted = out.x, out.status, out.message, out.interrupted
     if status == "callback_stop" or message.startswith("stopped by the callback"):  # `stop`: the CLI's Ctrl-C
         status, interrupted = "interrupted", True
@@ -196,7 +205,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         online=_online_trace(out.online, problem.names, settings) if out.online is not None else None,
         problem=problem, x=x, lm=out.lm, online_run=out.online,
         extra={"discretization": disc,
-               **({"shooting": _shooting(settings, out.lm)} if settings.shooting != "off" else {}),
+               **({"shooting": shooting} if shooting else {}),
                **({"initial_states": {"validation": state.to_dict()}} if state is not None else {}),
                **({"parameters_per_record": per_record} if per_record else {})},
     )
@@ -209,11 +218,36 @@ def discretization(diagram, network) -> dict:
             "step": network.step, "delays": delay_rule(diagram)}
 
 
-def _shooting(settings: IdentifySettings, lm: LMResult | None) -> dict:
-    """RESULT.json's `shooting`: the segment length asked for and the best start's stages (identify.shooting)."""
-    return {"length": settings.shooting, "stages": [dict(s) for s in lm.stages] if lm is not None else [],
-            "method": "multiple shooting, segments merged x4, continuity weight x10 per stage, then single "
-                      "shooting over whole records (the result)"}
+def _shooting(settings: IdentifySettings, lm: LMResult | None, auto=None) -> dict:
+    """RESULT.json's `shooting`: the segment length used (`auto`: what the rule chose and why), the best start's
+    stages, and which stage's fit is the result (`final_length`; `predictable` false when a merge was refused:
+    a chaotic record, validated on short horizons only; identify.shooting)."""
+    stages = [{k: None if isinstance(v, float) and not np.isfinite(v) else v for k, v in s.items()}
+              for s in lm.stages] if lm is not None else []  # a diverged stage's cost is inf: JSON has no inf
+    out = {"length": settings.shooting, "requested": "auto" if auto is not None else settings.shooting,
+           **({"auto": auto.to_dict()} if auto is not None else {}), "stages": stages,
+           "method": "multiple shooting, segments merged x4, continuity weight x10 per stage, then single "
+                     "shooting over whole records (the result, unless it costs more than 1.44x per sample than "
+                     "the last accepted stage while that stage is within 2x the noise: then that stage; a "
+                     "stage refused so is passed over)"}
+    kept = kept_stage(stages)
+    if kept is not None:
+        out["final_length"] = kept["length"]
+        out["predictable"] = kept is stages[-1]
+        if not out["predictable"]:
+            out["note"] = (f"multiple shooting: a free run of the fitted chart does not follow the whole records "
+                           f"(merging segments of {kept['length']} samples raised the cost per sample "
+                           f"{_rise(stages[-1], kept)}); the parameters come "
+                           f"from the stage with segments of {kept['length']} samples, and the fit is "
+                           f"validated on horizons of up to {kept['length']} samples only (the training and "
+                           f"validation RMS of whole-record free runs are not its measure)")
+    return out
+
+
+def _rise(stage: dict, kept: dict) -> str:
+    """How much costlier per sample the whole-record stage was than the kept one (for the note)."""
+    a, b = stage.get("cost_per_sample"), kept.get("cost_per_sample")
+    return f"{a / b:.3g}x" if a is not None and b else "beyond floating point: it diverged"
 
 
 def _resolved(chart, network):

@@ -53,6 +53,9 @@ def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str
     floor_line = _floor(result)
     if floor_line:
         out.append(floor_line)
+    shooting_line = _shooting(result)
+    if shooting_line:
+        out.append(shooting_line)
     out.extend(_bias(result))
     ms = result.multistart
     if ms and ms.n > 1:
@@ -78,6 +81,22 @@ def _floor(result: Identification) -> str | None:
         share = f" ({100 * f / r:.0f} % of RMS)" if r else ""
         parts.append(f"{name} {f:.3g}{share}")
     return ("discretization floor (network vs continuous chart, training input, RMS): " + ", ".join(parts))
+
+
+def _shooting(result: Identification) -> str | None:
+    """What multiple shooting did: auto's choice and the stage whose fit is the result (identify.shooting)."""
+    s = result.extra.get("shooting")
+    if not isinstance(s, dict):
+        return None
+    text = "shooting: "
+    if "auto" in s:
+        text += f"auto -> {s['auto']['chose']} ({s['auto']['reason']})"
+    else:
+        text += f"segments of {s['length']} samples"
+    if s.get("final_length") is not None:
+        text += ("; the result is single shooting over whole records" if s.get("predictable")
+                 else f"; the result is the stage with segments of {s['final_length']} samples (see the warning)")
+    return text
 
 
 def _bias(result: Identification) -> list[str]:

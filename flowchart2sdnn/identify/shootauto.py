@@ -1,0 +1,115 @@
+"""``--shooting auto``: the segment length from how far a free run of the chart stays predictable on the record.
+
+Why not the modes at rest. The sub-steps' auto reads the network's eigenvalues at rest; for shooting those do
+not tell the charts that single shooting cannot fit from the ones it can. On the two-mass drive (the issue's
+bench, J1 0.19, J2 0.38, c 477, d 0.24) the shaft mode at rest (the network's eigenvalues, N = 1) is 61 rad/s
+with a 0.97 s memory, 59 rad of phase before it forgets, and single shooting fits its 30 s record from rough
+starts (8 of 8, docs/rough_init.md); the same drive with motor cogging (0.4 sin 6 phi1) adds a 2.0 rad/s mode
+with a 23 s memory (47 rad, less), yet single shooting from a 20 % rough init stays stuck (validation 20x the
+noise, benchmarks/bench_chaotic.py); with shaft backlash the shaft is slack at rest (no oscillatory mode at
+all, one undamped), and a free run at the truth misses the 30 s record by 12x the noise. What decides is how an
+error of the state grows *along the record*: a finite-time Lyapunov growth, not a rest mode.
+
+The rule. The chart at its `init` is run over every training record from the record's own initial state, and
+again once per integrator state with that state's start moved by DELTA times the state's RMS over the run. The
+amplification a(t) is the largest deviation of any state at t, in units of its own RMS, divided by DELTA. A
+stable drive forgets the moved start (a(t) stays of order 1: over the test suite's 161 fits on records longer
+than 100 samples its peak had median 1.0, 95th percentile 3.9, largest 8.0, and 12 on the backlash chart at its
+rough init, where a moved speed shows in the small shaft twist); a chaotic one amplifies it exponentially. The
+predictable horizon H is the first sample where a(t) reaches GROWTH_BOUND:
+
+* a(t) < GROWTH_BOUND on every record: ``off`` (a free run follows the record; single shooting, unchanged);
+* otherwise the growth is exponential, a(t) ~ exp(lambda t) with lambda = ln(GROWTH_BOUND) / H (a finite-time
+  Lyapunov exponent), and L = H / ln(GROWTH_BOUND) samples: one Lyapunov time, so a start's error grows at
+  most e-fold within a segment. L is raised to the fewest samples that keep MAX_SEGMENTS segments; ``off``
+  when L is not shorter than the longest record.
+
+GROWTH_BOUND = 1000: a thousandfold growth of a start's error is well beyond the non-normal transients of the
+stable charts (at most 12 measured, see above), and L depends on it only through the estimate of lambda.
+
+Layer: identify (below it: network).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .initstate import state_neurons
+from .problem import Problem
+from .shooting import MAX_SEGMENTS, stage_lengths
+
+__all__ = ["ShootingChoice", "choose_shooting", "amplification", "GROWTH_BOUND", "DELTA"]
+
+#: A start's error grown this many times (in units of each state's RMS) ends the predictable horizon.
+GROWTH_BOUND = 1000.0
+#: The moved start: this many times the state's RMS (small enough to stay linear up to GROWTH_BOUND).
+DELTA = 1e-7
+
+
+@dataclass(frozen=True)
+class ShootingChoice:
+    """What ``--shooting auto`` chose and why (RESULT.json ``shooting.auto``)."""
+
+    length: int | None  # None: off
+    horizon: int | None  # samples until a start's error grew GROWTH_BOUND-fold (None: never on these records)
+    peak: float  # the largest amplification met
+    longest: int  # the longest training record, samples
+    reason: str
+
+    def to_dict(self) -> dict:
+        return {"chose": self.length if self.length is not None else "off", "horizon_samples": self.horizon,
+                "peak_amplification": self.peak if np.isfinite(self.peak) else None,  # None: it overflowed "growth_bound": GROWTH_BOUND, "longest_record": self.longest,
+                "reason": self.reason}
+
+
+def amplification(compiled, theta: np.ndarray, inputs: np.ndarray, init=None) -> np.ndarray:
+    """a(t), (Q,): the largest growth of a moved start over the run (see the module docstring)."""
+    ks = np.array([k for k, _ in state_neurons(compiled)], dtype=np.int64)
+    if not len(ks):
+        return np.zeros(len(inputs))
+    n_out = compiled.n_outputs
+    base = compiled.initial_history(init)
+    with np.errstate(all="ignore"):
+        ref = compiled.simulate(theta, inputs, history=base, states=ks)[:, n_out:]
+        rms = np.sqrt(np.mean(ref ** 2, axis=0))
+        rms = np.where(np.isfinite(rms) & (rms > 0), rms, 1.0)
+        out = np.zeros(len(inputs))
+        for j, k in enumerate(ks):
+            h = base.copy()
+            h[k] += DELTA * rms[j]
+            run = compiled.simulate(theta, inputs, history=h, states=ks)[:, n_out:]
+            a = np.max(np.abs(run - ref) / rms, axis=1) / DELTA
+            out = np.maximum(out, np.where(np.isfinite(a), a, np.inf))
+    return out
+
+
+def choose_shooting(problem: Problem, theta: np.ndarray) -> ShootingChoice:
+    """The segment length of ``--shooting auto`` for `problem` at `theta` (the chart's init)."""
+    longest = max(len(s.inputs) for s in problem.segments)
+    horizon, peak = None, 0.0
+    if problem.compiled.estimates_starts or problem.record_params:  # shooting refuses them (FIT006)
+        return ShootingChoice(None, None, 0.0, longest, "estimated initial states or per-record parameters: "
+                              "multiple shooting does not combine with them yet, single shooting")
+    for s in problem.segments:
+        a = amplification(problem.compiled, theta, s.inputs, s.init)
+        peak = max(peak, float(np.max(a)) if len(a) else 0.0)
+        over = np.flatnonzero(a >= GROWTH_BOUND)
+        if len(over):
+            horizon = int(over[0]) if horizon is None else min(horizon, int(over[0]))
+    if horizon is None:
+        return ShootingChoice(None, None, peak, longest,
+                              f"a free run forgets a moved start (largest growth {peak:.3g} < {GROWTH_BOUND:g}): "
+                              "single shooting follows the records")
+    total = sum(len(s.inputs) for s in problem.segments)
+    fewest = -(-total // MAX_SEGMENTS)
+    length = max(2, int(horizon / np.log(GROWTH_BOUND)), fewest)
+    why = (f"a moved start grows {GROWTH_BOUND:g}-fold after {horizon} samples")
+    if not stage_lengths(length, longest):
+        return ShootingChoice(None, horizon, peak, longest,
+                              why + f", not shorter than the longest record ({longest} samples): single shooting")
+    why += f" (one Lyapunov time: {horizon} / ln {GROWTH_BOUND:g} = {int(horizon / np.log(GROWTH_BOUND))})"
+    if length > int(horizon / np.log(GROWTH_BOUND)):
+        why += f"; raised to {length} to keep at most {MAX_SEGMENTS} segments"
+    return ShootingChoice(length, horizon, peak, longest, why + f": segments of {length} samples")
