@@ -146,6 +146,16 @@ def test_identify_with_shooting_finds_the_plant_and_ends_in_single_shooting():
     assert auto["requested"] == "auto" and auto["auto"]["chose"] == "off" and auto["stages"] == []
 
 
+def test_segments_on_two_threads_give_the_same_fit():
+    data = _data(COULOMB_PLANT, 1200, 2, ["w1", "w2"], noise=0.01)
+    chart = load_diagram(COULOMB)
+    one, two = (identify(chart, data, shooting=100, max_iter=30, floor_bias=False, threads=t) for t in (1, 2))
+    assert [p.value for p in one.parameters.values()] == [p.value for p in two.parameters.values()]
+    assert one.extra["shooting"]["stages"] == two.extra["shooting"]["stages"]
+    with pytest.raises(ValueError, match="threads must be a whole number >= 1"):
+        IdentifySettings(threads=0)
+
+
 def test_stage_lengths():
     assert stage_lengths(100, 30000) == [100, 400, 1600, 6400, 25600]
     assert stage_lengths(500, 400) == []  # one segment per record: single shooting only

@@ -285,7 +285,7 @@ def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, pro
             return bool(stop and stop())
 
         fit_one = functools.partial(run_start, problem, lower=lower, upper=upper, options=options,
-                                    callback=callback, shooting=shooting)
+                                    callback=callback, shooting=shooting, threads=settings.threads)
     else:
         fit_one = functools.partial(fit_start, fit_task(problem, lower, upper, options, shooting))
 

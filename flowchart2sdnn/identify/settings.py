@@ -85,6 +85,8 @@ class IdentifySettings:
                              a merge that raises the cost per sample more than MERGE_RISE is refused and the
                              stage before is the result); "off": single shooting only; "auto": L or off chosen
                              from how fast a moved start grows along the records (identify.shootauto)
+    threads : int            threads for multiple shooting's segments within one fit in this process (the kernels
+                             release the GIL); fits in worker processes (an executor) use one
     floor_bias : bool        estimate the discretization's bias beta on each parameter by refitting the network to
                              the continuous oracle's run of the identified chart (identify.floorbias) and widen
                              ci95 by |beta| (see :data:`FLOOR_BIAS`); offline fits only (quasi-online skips it)
@@ -108,6 +110,7 @@ class IdentifySettings:
     init_window: int = 0
     shooting: str | int = SHOOTING
     floor_bias: bool = FLOOR_BIAS
+    threads: int = 1
 
     def __post_init__(self):
         _need(self.starts >= 1, f"starts must be at least 1, got {self.starts}")
@@ -129,5 +132,7 @@ class IdentifySettings:
               f"shooting must be 'off', 'auto' or a segment length of at least 2 samples, got {self.shooting!r}")
         _need(not (self.online and self.shooting not in ("off", "auto")),  # auto: off for the window
               "shooting applies to offline fits, not to the quasi-online window")
+        _need(isinstance(self.threads, int) and not isinstance(self.threads, bool) and self.threads >= 1,
+              f"threads must be a whole number >= 1, got {self.threads!r}")
         _need(self.lm_scale in ("jac", "none"), f"lm_scale must be 'jac' or 'none', got {self.lm_scale!r}")
         _need(self.lm_tau >= 0 and math.isfinite(self.lm_tau), f"lm_tau must be a finite number >= 0, got {self.lm_tau}")

@@ -313,7 +313,7 @@ def _state_scale(problem: Problem, theta: np.ndarray, free: np.ndarray) -> np.nd
 
 
 def shooting_fit(problem: Problem, start: np.ndarray, lower, upper, options: LMOptions, length: int,
-                 callback=None, guard=None) -> LMResult:
+                 callback=None, guard=None, threads: int = 1) -> LMResult:
     """Multiple-shooting stages from `start`, then single shooting (problem.fun) from their result.
 
     Returns the last accepted stage's LMResult (the result: single shooting unless a merge was refused, see the
@@ -329,7 +329,7 @@ def shooting_fit(problem: Problem, start: np.ndarray, lower, upper, options: LMO
     before = None  # (output cost per sample, the stage's result in theta's terms) of the last accepted stage
     floor = 0.5 * NOISE_MARGIN ** 2 * noise_level(problem)  # a stage's cost per sample at the noise floor
     for i, L in enumerate(lengths):
-        seg = Segmented(problem, L, WEIGHT_GROWTH ** i, scale)
+        seg = Segmented(problem, L, WEIGHT_GROWTH ** i, scale, threads)
         if scale is None:  # the states' sizes at the start, kept over the stages (the weights grow alone)
             scale = seg.scale = _state_scale(problem, theta, seg.free)
             seg.row_weight = seg.weight * np.sqrt(seg.length) / scale

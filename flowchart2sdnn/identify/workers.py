@@ -108,7 +108,7 @@ def problem_of(task: FitTask):
 
 
 def run_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, options,
-              callback: Callable | None = None, shooting: int = 0) -> LMResult:
+              callback: Callable | None = None, shooting: int = 0, threads: int = 1) -> LMResult:
     """Levenberg-Marquardt from ``start`` on ``problem``: the one way a start is fitted, serial or in a worker.
 
     Parameters
@@ -121,11 +121,13 @@ def run_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, 
         Progress and stop (True stops) after each iteration; only where the caller's process runs the fit.
     shooting : int
         > 0: multiple shooting with segments of this many samples first (identify.shooting.shooting_fit).
+    threads : int
+        threads for multiple shooting's segments.
     """
     own = problem.from_start(start)
     if shooting:
         return shooting_fit(own, np.asarray(start, dtype=float), lower, upper, options, shooting,
-                            callback=callback, guard=own.guard)
+                            callback=callback, guard=own.guard, threads=threads)
     return levenberg_marquardt(own.fun, np.asarray(start, dtype=float), problem.names, lower, upper, options,
                                callback=callback, guard=own.guard, residual=own.residual)
 
