@@ -52,6 +52,7 @@ from scipy.optimize import least_squares  # noqa: E402
 
 from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
+from flowchart2sdnn.identify.curvestart import curve_start  # noqa: E402
 from flowchart2sdnn.identify.problem import build_problem  # noqa: E402
 from flowchart2sdnn.identify.run import lm_options  # noqa: E402
 from flowchart2sdnn.identify.settings import IdentifySettings  # noqa: E402
@@ -60,8 +61,11 @@ from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noq
 
 CHARTS = {"learned": ("two_mass", "two_mass_plant"), "coulomb": ("two_mass_coulomb", "two_mass_coulomb_plant")}
 #: our LM with one change each; "default" is identify's default
+#: ("curve_start": "random" starts the learned curves from the chart's seeded weights, the default before
+#: identify.curvestart; every other key is an LMOptions field)
 VARIANTS = {
     "default": {},
+    "random-curves": {"curve_start": "random"},
     "noscale": {"scale": "none"},
     "jac-per-weight": {"scale": "jac", "scale_groups": ()},
     "tau0": {"tau": 0.0},
@@ -97,10 +101,16 @@ def fit_ours(chart, data, variant: dict, seed: int, shooting: int = 0):
     problem = build_problem(chart, data, seed=seed)
     x0 = problem.compiled.theta0()
     lo, hi = problem.bounds()
+    variant = dict(variant)
+    curves = variant.pop("curve_start", IdentifySettings().curve_start)
     opts = dataclasses.replace(lm_options(IdentifySettings(seed=seed), problem), **variant)
     t0 = time.perf_counter()
+    brief = 0
+    if curves == "stick":  # as identify's _offline: the learned curves' step start and brief fit first
+        warm = curve_start(problem, x0, lo, hi, opts)
+        x0, brief = warm.x, warm.iterations
     r = run_start(problem, x0, lo, hi, opts, shooting=shooting)
-    iterations = r.iterations + sum(s["iterations"] for s in r.stages[:-1])  # every stage's (multiple shooting)
+    iterations = brief + r.iterations + sum(s["iterations"] for s in r.stages[:-1])  # every stage's (shooting)
     return problem, r.x, r.cost, time.perf_counter() - t0, iterations, r.status
 
 

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = ["IdentifySettings", "IDENTIFY_TAU", "REFIT_TAU", "ONLINE_TAU", "MIN_REL_COST_CHANGE",
-           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "FLOOR_BIAS"]
+           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "FLOOR_BIAS", "CURVE_START"]
 
 #: First LM damping mu = tau * max diag(JᵀJ) (Madsen-Nielsen-Tingleff) for a fit from a chart's rough `init`:
 #: with trainlm's fixed 1e-3 a single start from the paper's Table 1 reached J1 in 2 of 5 seeds, with this 5/5.
@@ -41,6 +41,11 @@ CONVERGED_DECREASE = 0.01
 #: for 13 of 21 parameters (three-mass c1 3 of 10), the widened ones for 21 of 21, at x1.24-1.33 the fit's time
 #: (benchmarks/bench_floor_acceptance.py).
 FLOOR_BIAS = True
+#: Learned curves in a feedback loop start as a stick-slip step at 0.3 of the slope the network's step allows,
+#: a log grid for the other neurons, then a brief fit and the step re-sloped (identify.curvestart): on the
+#: two-mass learned-curve bench (10 s, x/3 rough inits) from the chart's random +-0.5 weights 1 of 4 single starts
+#: reached the lowest minimum, from this start 8 of 8 (docs/rough_init.md). "random": the chart's seeded weights.
+CURVE_START = "stick"
 
 
 def _need(ok: bool, text: str) -> None:
@@ -77,6 +82,9 @@ class IdentifySettings:
     floor_bias : bool        estimate the discretization's bias beta on each parameter by refitting the network to
                              the continuous oracle's run of the identified chart (identify.floorbias) and widen
                              ci95 by |beta| (see :data:`FLOOR_BIAS`); offline fits only (quasi-online skips it)
+    curve_start : str        "stick": learned curves without stored weights in a feedback loop start from a
+                             stick-slip step and a brief fit (identify.curvestart, :data:`CURVE_START`); "random": the
+                             chart's seeded +-init_range weights. Offline fits only.
     """
 
     starts: int = 1
@@ -97,6 +105,7 @@ class IdentifySettings:
     init_window: int = 0
     shooting: str | int = "off"
     floor_bias: bool = FLOOR_BIAS
+    curve_start: str = CURVE_START
 
     def __post_init__(self):
         _need(self.starts >= 1, f"starts must be at least 1, got {self.starts}")
@@ -118,5 +127,7 @@ class IdentifySettings:
               f"shooting must be 'off' or a segment length of at least 2 samples, got {self.shooting!r}")
         _need(not (self.online and self.shooting != "off"),
               "shooting applies to offline fits, not to the quasi-online window")
+        _need(self.curve_start in ("stick", "random"),
+              f"curve_start must be 'stick' or 'random', got {self.curve_start!r}")
         _need(self.lm_scale in ("jac", "none"), f"lm_scale must be 'jac' or 'none', got {self.lm_scale!r}")
         _need(self.lm_tau >= 0 and math.isfinite(self.lm_tau), f"lm_tau must be a finite number >= 0, got {self.lm_tau}")
