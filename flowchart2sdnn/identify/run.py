@@ -252,8 +252,7 @@ def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, pro
 
     warm = None
     if settings.curve_start == "stick":  # learned curves in a loop: a stick-slip step and a brief fit first
-        warm = curve_start(problem, x0, lower, upper, options,
-                           fit=functools.partial(run_start, callback=callback if executor is None else None))
+        warm = curve_start(problem, x0, lower, upper, options, callback=callback if executor is None else None)
     if warm is not None and warm.curves:
         starts = draw_starts(problem.names, warm.template, lower, upper, settings.starts, settings.seed,
                              ranges=settings.ranges or None)
