@@ -97,9 +97,9 @@ def test_the_template_is_a_step_at_the_stick_fraction_of_the_limit_then_a_log_gr
     assert w["F.a1"] * w["F.v1"] == pytest.approx(STICK_FRACTION * 2 * 0.5 / T, rel=1e-6)  # tanh'(0) = 1
     assert w["F.v2"] == w["F.v3"] == 0.0
     assert w["F.a2"] / w["F.a3"] == pytest.approx(10.0)
-    # a2 = 1 / RMS of the curve's input in a free run: the record's speed, of order 1 rad/s here
+    # a2 = 1 / RMS (top = 1) of the curve's input in a free run: of the record's speed, here measured
     rms = float(np.sqrt(np.mean(np.asarray(record.columns["w"]) ** 2)))
-    assert 0.1 / rms < w["F.a2"] < 10 / rms
+    assert 0.3 / rms < w["F.a2"] < 3 / rms
 
 
 def test_after_the_brief_fit_the_step_keeps_the_stick_fraction_at_the_fitted_inertia(record):
@@ -107,7 +107,7 @@ def test_after_the_brief_fit_the_step_keeps_the_stick_fraction_at_the_fitted_ine
     lo, hi = p.bounds()
     warm = curve_start(p, p.compiled.theta0(), lo, hi, lm_options(IdentifySettings(seed=1), p))
     w = dict(zip(p.names, warm.x, strict=True))
-    assert warm.curves == ("F",) and 0 < warm.iterations <= 50
+    assert warm.curves == ("F",) and 0 < warm.iterations <= 100  # two brief fits of at most 50
     # the limit is re-measured at the fitted J: 2 J / T again, by hand
     assert warm.limits["F"] == pytest.approx(2 * w["J"] / T, rel=1e-6)
     assert w["F.a1"] * w["F.v1"] == pytest.approx(STICK_FRACTION * 2 * w["J"] / T, rel=1e-6)

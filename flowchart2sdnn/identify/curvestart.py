@@ -9,13 +9,14 @@ about 2J/T at zero the delayed feedback chatters, network.stability) starts as
 
 * neuron 1: a step of level ``STEP_LEVEL`` whose slope at zero is ``STICK_FRACTION`` of the slope at which the
   network would chatter (found by bisection on the rest eigenvalues, every other curve flat);
-* neuron k >= 2: input weight ``GRID_TOP`` * 10^-(k-2) / RMS of the curve's input in a free run (a log grid
+* neuron k >= 2: input weight g * 10^-(k-2) / RMS of the curve's input in a free run (a log grid
   across the signal's range: a bend at a third of the RMS, the Stribeck fall, then a nearly linear viscous
   part), output weight 0 (and bias 0);
 
 then ``BRIEF_ITERATIONS`` LM iterations fit the whole chart (the physical parameters, an inertia among them,
 settle), and the step is re-sloped to ``STICK_FRACTION`` of the limit at the fitted values, keeping its level.
-The fit itself starts from there. Curves with stored weights, fixed curves and curves whose slope no chatter
+This runs once for each g of ``GRID_TOPS`` (a brief internal multi-start over the curves' shape); the fit itself
+starts from the re-sloped point of lower cost. Curves with stored weights, fixed curves and curves whose slope no chatter
 bounds (outside any loop) keep the chart's start.
 
 Layer: identify (below it: fit, network).
@@ -30,7 +31,7 @@ import numpy as np
 from .problem import CHATTER_LIMIT, Problem
 from .workers import run_start
 
-__all__ = ["CurveStart", "STICK_FRACTION", "BRIEF_ITERATIONS", "STEP_LEVEL", "GRID_TOP", "startable_curves", "slope_limit",
+__all__ = ["CurveStart", "STICK_FRACTION", "BRIEF_ITERATIONS", "STEP_LEVEL", "GRID_TOPS", "startable_curves", "slope_limit",
            "stick_template", "curve_start"]
 
 #: The step neuron's slope at zero as a fraction of the slope at which the network chatters. On the two-mass
@@ -42,10 +43,10 @@ STICK_FRACTION = 0.3
 BRIEF_ITERATIONS = 50
 #: The step's starting output weight, in the curve's output unit (the fit moves it; only its slope is kept).
 STEP_LEVEL = 1.0
-#: Neuron 2's input weight times the RMS of the curve's input (neuron k: 10^-(k-2) times less). With 1, 2 of
-#: 20 rough draws of the two-mass bench ended in a minimum 1.7x higher (neuron 2 merged with neuron 3 into one
-#: linear term); with 3 those two draws reached the lowest (docs/rough_init.md).
-GRID_TOP = 3.0
+#: Neuron 2's input weight times the RMS of the curve's input (neuron k: 10^-(k-2) times less), one brief fit
+#: each, the lower cost kept. On the two-mass bench (20 rough draws) 1 alone left 2 draws in a minimum 1.3-1.7x
+#: higher (neuron 2 merged with neuron 3 into one linear term), 3 alone 3 others (docs/rough_init.md).
+GRID_TOPS = (1.0, 3.0)
 #: Bisection range of a slope at zero.
 _SLOPES = (1e-9, 1e12)
 
@@ -127,7 +128,8 @@ def _input_rms(problem: Problem, x: np.ndarray, block: str) -> float:
     return rms if rms > 0 else 1.0
 
 
-def stick_template(problem: Problem, x: np.ndarray, curves: dict | None = None) -> tuple[np.ndarray, dict]:
+def stick_template(problem: Problem, x: np.ndarray, curves: dict | None = None,
+                   top: float = 1.0) -> tuple[np.ndarray, dict]:
     """x with every qualifying curve set to the step + log grid of the module docstring; (x, {block: limit})."""
     curves = startable_curves(problem) if curves is None else curves
     y = np.array(x, dtype=float)
@@ -145,26 +147,16 @@ def stick_template(problem: Problem, x: np.ndarray, curves: dict | None = None) 
         roles = curves[block]
         rms = _input_rms(problem, y, block)
         for k, i in enumerate(roles["a"][1:]):
-            y[i] = GRID_TOP * 10.0 ** (-k) / rms
+            y[i] = top * 10.0 ** (-k) / rms
     return y, limits
 
 
-def curve_start(problem: Problem, x: np.ndarray, lower: np.ndarray, upper: np.ndarray, options,
-                callback=None) -> CurveStart:
-    """The start of an offline fit with learned curves (module docstring). `options` are the fit's LMOptions;
-    `callback` is LM's (progress, stop)."""
-    curves = startable_curves(problem)
-    x = np.asarray(x, dtype=float)
-    if not curves:
-        return CurveStart(x, (), 0, {})
-    y, limits = stick_template(problem, x, curves)
-    template = y.copy()
-    if not limits:
-        return CurveStart(x, (), 0, {})
+def _brief(problem: Problem, y: np.ndarray, curves: dict, limits: dict, lower, upper, options, callback):
+    """The brief fit from template y and the steps re-sloped: (start, its cost, iterations, limits)."""
     brief = run_start(problem, y, lower, upper, replace(options, max_iter=BRIEF_ITERATIONS), callback=callback)
-    y = np.array(brief.x, dtype=float)
-    if not np.isfinite(brief.cost):  # the template diverged: leave the chart's own start
-        return CurveStart(x, (), 0, {})
+    if not np.isfinite(brief.cost):
+        return None
+    y, limits = np.array(brief.x, dtype=float), dict(limits)
     for block in limits:
         roles = curves[block]
         limit = slope_limit(problem, y, block, curves)
@@ -172,4 +164,29 @@ def curve_start(problem: Problem, x: np.ndarray, lower: np.ndarray, upper: np.nd
         if np.isfinite(limit) and limit > 0 and abs(v1) > 1e-9:
             limits[block] = limit
             y[roles["a"][0]] = STICK_FRACTION * limit / v1  # the sign of v1: a positive (damping) slope
-    return CurveStart(y, tuple(limits), int(brief.iterations), limits, template)
+    e = problem.residual(y)
+    cost = 0.5 * float(e @ e) if e is not None and np.all(np.isfinite(e)) else float("inf")
+    return y, cost, int(brief.iterations), limits
+
+
+def curve_start(problem: Problem, x: np.ndarray, lower: np.ndarray, upper: np.ndarray, options,
+                callback=None) -> CurveStart:
+    """The start of an offline fit with learned curves (module docstring): one brief fit per grid of
+    ``GRID_TOPS``, the re-sloped point of lower cost kept. `options` are the fit's LMOptions; `callback` is LM's
+    (progress, stop)."""
+    curves = startable_curves(problem)
+    x = np.asarray(x, dtype=float)
+    best, iterations, template = None, 0, None
+    for top in GRID_TOPS:
+        y, limits = stick_template(problem, x, curves, top)
+        if not limits:
+            return CurveStart(x, (), 0, {})
+        out = _brief(problem, y, curves, limits, lower, upper, options, callback)
+        if out is None:
+            continue
+        iterations += out[2]
+        if best is None or out[1] < best[1]:
+            best, template = out, y
+    if best is None:  # every template diverged: leave the chart's own start
+        return CurveStart(x, (), 0, {})
+    return CurveStart(best[0], tuple(best[3]), iterations, best[3], template)
