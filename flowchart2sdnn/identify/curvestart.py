@@ -8,7 +8,8 @@ values (docs/rough_init.md). So a curve whose slope the network's step bounds (a
 about 2J/T at zero the delayed feedback chatters, network.stability) starts as
 
 * neuron 1: a step of level ``STEP_LEVEL`` whose slope at zero is ``STICK_FRACTION`` of the slope at which the
-  network would chatter (found by bisection on the rest eigenvalues, every other curve flat);
+  network would chatter (found by bisection on the rest eigenvalues, every other curve flat), divided by the
+  sub-steps (the limit at one step per sample);
 * neuron k >= 2: input weight g * 10^-(k-2) / RMS of the curve's input in a free run (a log grid
   across the signal's range: a bend at a third of the RMS, the Stribeck fall, then a nearly linear viscous
   part), output weight 0 (and bias 0);
@@ -61,6 +62,7 @@ class CurveStart:
     iterations: int
     limits: dict
     template: np.ndarray | None = None  # the step + grid before the brief fit (other starts are drawn around it)
+    stopped: object | None = None  # the brief fit's LMResult when the callback stopped it (Ctrl-C): the run ends
 
     def to_dict(self) -> dict:
         return {"curves": list(self.curves), "iterations": self.iterations,
@@ -128,6 +130,14 @@ def _input_rms(problem: Problem, x: np.ndarray, block: str) -> float:
     return rms if rms > 0 else 1.0
 
 
+def _stick_slope(problem: Problem, limit: float) -> float:
+    """The step's slope at zero: STICK_FRACTION of the limit at one network step per sample. With N sub-steps
+    the limit (2J/h) is N times the sample's (2J/T), but the data, and so the slope that holds a shaft at rest
+    between two samples, are the same (the engine example at N = 4 from 0.3 of 2J/h: 1000 iterations, not
+    converged)."""
+    return STICK_FRACTION * limit / max(1, problem.network.substeps)
+
+
 def stick_template(problem: Problem, x: np.ndarray, curves: dict | None = None,
                    top: float = 1.0) -> tuple[np.ndarray, dict]:
     """x with every qualifying curve set to the step + log grid of the module docstring; (x, {block: limit})."""
@@ -139,7 +149,7 @@ def stick_template(problem: Problem, x: np.ndarray, curves: dict | None = None,
         if not np.isfinite(limit) or limit <= 0:
             continue
         limits[block] = limit
-        y[roles["a"][0]] = STICK_FRACTION * limit / STEP_LEVEL
+        y[roles["a"][0]] = _stick_slope(problem, limit) / STEP_LEVEL
         y[roles["v"][0]] = STEP_LEVEL
         y[roles["v"][1:]] = 0.0
         y[roles["b"]] = 0.0
@@ -154,6 +164,8 @@ def stick_template(problem: Problem, x: np.ndarray, curves: dict | None = None,
 def _brief(problem: Problem, y: np.ndarray, curves: dict, limits: dict, lower, upper, options, callback):
     """The brief fit from template y and the steps re-sloped: (start, its cost, iterations, limits)."""
     brief = run_start(problem, y, lower, upper, replace(options, max_iter=BRIEF_ITERATIONS), callback=callback)
+    if brief.status in ("callback_stop", "interrupted"):
+        return brief
     if not np.isfinite(brief.cost):
         return None
     y, limits = np.array(brief.x, dtype=float), dict(limits)
@@ -163,7 +175,7 @@ def _brief(problem: Problem, y: np.ndarray, curves: dict, limits: dict, lower, u
         v1 = y[roles["v"][0]]
         if np.isfinite(limit) and limit > 0 and abs(v1) > 1e-9:
             limits[block] = limit
-            y[roles["a"][0]] = STICK_FRACTION * limit / v1  # the sign of v1: a positive (damping) slope
+            y[roles["a"][0]] = _stick_slope(problem, limit) / v1  # the sign of v1: a positive (damping) slope
     e = problem.residual(y)
     cost = 0.5 * float(e @ e) if e is not None and np.all(np.isfinite(e)) else float("inf")
     return y, cost, int(brief.iterations), limits
@@ -184,6 +196,9 @@ def curve_start(problem: Problem, x: np.ndarray, lower: np.ndarray, upper: np.nd
         out = _brief(problem, y, curves, limits, lower, upper, options, callback)
         if out is None:
             continue
+        if not isinstance(out, tuple):  # stopped by the callback: no further work
+            return CurveStart(np.array(out.x, dtype=float), tuple(limits), iterations + out.iterations, limits, y,
+                              stopped=out)
         iterations += out[2]
         if best is None or out[1] < best[1]:
             best, template = out, y

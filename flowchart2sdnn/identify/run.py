@@ -253,6 +253,10 @@ def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, pro
     warm = None
     if settings.curve_start == "stick":  # learned curves in a loop: a stick-slip step and a brief fit first
         warm = curve_start(problem, x0, lower, upper, options, callback=callback if executor is None else None)
+    if warm is not None and warm.stopped is not None:  # Ctrl-C during the curves' brief fits
+        lm = warm.stopped
+        return _Outcome(np.asarray(lm.x, dtype=float), lm.status, lm.message, True, lm=lm,
+                        curve_start=warm.to_dict())
     if warm is not None and warm.curves:
         starts = draw_starts(problem.names, warm.template, lower, upper, settings.starts, settings.seed,
                              ranges=settings.ranges or None)
