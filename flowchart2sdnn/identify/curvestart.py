@@ -11,10 +11,11 @@ about 2J/T at zero the delayed feedback chatters, network.stability) starts as
   network would chatter (found by bisection on the rest eigenvalues, every other curve flat), divided by the
   sub-steps (the limit at one step per sample);
 * neuron k >= 2: input weight g * 10^-(k-2) / RMS of the curve's input in a free run (a log grid
-  across the signal's range: a bend at a third of the RMS, the Stribeck fall, then a nearly linear viscous
+  across the signal's range: neuron 2 bends at 1/g of the RMS, the Stribeck fall, then a nearly linear viscous
   part), output weight 0 (and bias 0);
 
-then ``BRIEF_ITERATIONS`` LM iterations fit the whole chart (the physical parameters, an inertia among them,
+all of it at the physical values of ``BRIEF_ITERATIONS`` LM iterations from the chart's own start; then
+``BRIEF_ITERATIONS`` LM iterations fit the whole chart (the physical parameters, an inertia among them,
 settle), and the step is re-sloped to ``STICK_FRACTION`` of the limit at the fitted values, keeping its level.
 This runs once for each g of ``GRID_TOPS`` (a brief internal multi-start over the curves' shape); the fit itself
 starts from the re-sloped point of lower cost. Curves with stored weights, fixed curves and curves whose slope no chatter
@@ -188,9 +189,17 @@ def curve_start(problem: Problem, x: np.ndarray, lower: np.ndarray, upper: np.nd
     (progress, stop)."""
     curves = startable_curves(problem)
     x = np.asarray(x, dtype=float)
-    best, iterations, template = None, 0, None
+    if not curves or not any(np.isfinite(slope_limit(problem, x, b, curves)) for b in curves):
+        return CurveStart(x, (), 0, {})
+    # the physical values first, from the chart's own start: a step of level 1 on a stiffness and an inertia
+    # both drawn x2 too large sent both brief fits to c +96 % (docs/rough_init.md, seed 2)
+    first = run_start(problem, x, lower, upper, replace(options, max_iter=BRIEF_ITERATIONS), callback=callback)
+    if first.status in ("callback_stop", "interrupted"):
+        return CurveStart(np.array(first.x, dtype=float), (), first.iterations, {}, stopped=first)
+    start = np.array(first.x, dtype=float) if np.isfinite(first.cost) else x
+    best, iterations, template = None, int(first.iterations), None
     for top in GRID_TOPS:
-        y, limits = stick_template(problem, x, curves, top)
+        y, limits = stick_template(problem, start, curves, top)
         if not limits:
             return CurveStart(x, (), 0, {})
         out = _brief(problem, y, curves, limits, lower, upper, options, callback)

@@ -265,7 +265,6 @@ def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, pro
         starts = draw_starts(problem.names, x0, lower, upper, settings.starts, settings.seed,
                              ranges=settings.ranges or None)
     if executor is None:  # in this process: progress and Ctrl-C after every LM iteration
-
         fit_one = functools.partial(run_start, problem, lower=lower, upper=upper, options=options,
                                     callback=callback, shooting=shooting)
     else:
