@@ -24,7 +24,8 @@ shared 2-core machine). Measured (seed 1; more in docs/rough_init.md):
 | coulomb, 10 s, N = 3 | 2/3, 167-668 iterations | 3/3, 22-27 | 3/3, 14-24 evaluations |
 | coulomb, 30 s, N = 8 | — | 8/8, median 44, 10.0 s | 8/8, median 21, 2.8 s |
 | learned, 10 s, N = 4 (vs best truth start) | 0/4, 3 of 4 at the 1000 limit | 1/4, 258-337 | 0/4, 116-1000 |
-| learned, 10 s, N = 20, curves' stick-slip start (default) vs ``--variant random-curves`` | — | 19/20, median 398 (random curves: 0/20, 317) | — |
+| learned, 10 s, N = 20, curves' stick-slip start (default) vs ``--variant random-curves`` | — | 20/20, median 450 (random curves: 0/20, 317) | — |
+| learned, 10 s, N = 10, ``--seed 2``, the same | — | 10/10, 8 of them at the 1000 limit (random curves: 0/10, all 10 at it) | — |
 
 ``--shooting L`` adds our default LM with multiple shooting (identify.shooting). learned, 10 s, N = 4, seed 1,
 ``--shooting 250`` (stages 250/1000/4000, then single shooting): 0/4 against 1/4 single shooting (costs 1.35-13.2

@@ -107,7 +107,7 @@ def test_after_the_brief_fit_the_step_keeps_the_stick_fraction_at_the_fitted_ine
     lo, hi = p.bounds()
     warm = curve_start(p, p.compiled.theta0(), lo, hi, lm_options(IdentifySettings(seed=1), p))
     w = dict(zip(p.names, warm.x, strict=True))
-    assert warm.curves == ("F",) and 0 < warm.iterations <= 100  # two brief fits of at most 50
+    assert warm.curves == ("F",) and 0 < warm.iterations <= 150  # three brief fits of at most 50
     # the limit is re-measured at the fitted J: 2 J / T again, by hand
     assert warm.limits["F"] == pytest.approx(2 * w["J"] / T, rel=1e-6)
     assert w["F.a1"] * w["F.v1"] == pytest.approx(STICK_FRACTION * 2 * w["J"] / T, rel=1e-6)

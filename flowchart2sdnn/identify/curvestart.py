@@ -3,7 +3,7 @@
 A learned friction curve's local minima are set by its steepest neuron: its slope at zero (how hard the curve
 holds a shaft at rest in the discrete network) barely moves during a fit, because that neuron is saturated
 over almost all samples and its input weight's Jacobian column is tiny. From the chart's random +-0.5 weights
-the two-mass drive's fits ended anywhere from 1.13 to 1.9 times the best cost, even from the true physical
+the two-mass drive's fits ended anywhere from 1.1 to 2.8 times the best cost, even from the true physical
 values (docs/rough_init.md). So a curve whose slope the network's step bounds (a curve in a feedback loop: above
 about 2J/T at zero the delayed feedback chatters, network.stability) starts as
 

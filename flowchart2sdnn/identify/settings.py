@@ -42,9 +42,9 @@ CONVERGED_DECREASE = 0.01
 #: (benchmarks/bench_floor_acceptance.py).
 FLOOR_BIAS = True
 #: Learned curves in a feedback loop start as a stick-slip step at 0.3 of the slope the network's step allows,
-#: a log grid for the other neurons, two brief fits and the step re-sloped (identify.curvestart): on the
+#: a log grid for the other neurons, three brief fits and the step re-sloped (identify.curvestart): on the
 #: two-mass learned-curve bench (10 s, 20 rough draws x/3) single starts from the chart's random +-0.5 weights
-#: reached the lowest minimum 0 of 20 times, from this start 19 of 20 (docs/rough_init.md). "random": the chart's
+#: reached the lowest minimum 0 of 20 times, from this start 20 of 20 (docs/rough_init.md). "random": the chart's
 #: seeded weights.
 CURVE_START = "stick"
 
