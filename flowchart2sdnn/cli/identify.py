@@ -57,7 +57,8 @@ __all__ = ["identify"]
 @click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
               help="Train on this leading fraction of DATA, validate on the rest.")
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Multi-start: number of seeded starts (the first is the chart's init); with --online, that many "
+              help="Multi-start: number of seeded starts (the first is the chart's init, its learned curves as "
+                   "--curve-start sets them); with --online, that many "
                    "quasi-online runs, the one with the lowest final window cost reported.")
 @seed_option("Seed for starts and initial curves.")
 @click.option("--online", is_flag=True, help="Quasi-online LM over a sliding window (paper section 3.1).")

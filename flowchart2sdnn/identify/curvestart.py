@@ -62,7 +62,7 @@ class CurveStart:
     curves: tuple[str, ...]
     iterations: int
     limits: dict
-    template: np.ndarray | None = None  # the step + grid before the brief fit (other starts are drawn around it)
+    template: np.ndarray | None = None  # the chart's start with the curves' step + grid: further starts' centre
     stopped: object | None = None  # the brief fit's LMResult when the callback stopped it (Ctrl-C): the run ends
 
     def to_dict(self) -> dict:
@@ -213,4 +213,9 @@ def curve_start(problem: Problem, x: np.ndarray, lower: np.ndarray, upper: np.nd
             best, template = out, y
     if best is None:  # every template diverged: leave the chart's own start
         return CurveStart(x, (), 0, {})
-    return CurveStart(best[0], tuple(best[3]), iterations, best[3], template)
+    # further starts of a multi-start: the chart's own physical values, the curves as the kept template
+    around = x.copy()
+    for block in best[3]:
+        for role in ("a", "v", "b"):
+            around[curves[block][role]] = template[curves[block][role]]
+    return CurveStart(best[0], tuple(best[3]), iterations, best[3], around)
