@@ -52,8 +52,8 @@ __all__ = ["identify"]
                    "discretization.bias). Offline fits only (--online skips it).")
 @click.option("--curve-start", type=click.Choice(["stick", "random"]), default="stick", show_default=True,
               help="Where learned curves without stored weights start: 'stick', for a curve in a feedback loop a "
-                   "stick-slip step at 0.3 of the slope the network's step allows and a brief 50-iteration fit "
-                   "(docs/rough_init.md); 'random', the chart's seeded init_range weights. Offline fits only.")
+                   "stick-slip step at 0.3 of the slope the network's step allows, set after brief fits (at most "
+                   "150 iterations; docs/rough_init.md); 'random', the chart's seeded init_range weights. Offline fits only.")
 @click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
               help="Train on this leading fraction of DATA, validate on the rest.")
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
