@@ -150,3 +150,20 @@ def test_with_sub_steps_the_step_keeps_the_slope_of_one_step_per_sample(record):
     x, _ = stick_template(p, p.compiled.theta0(), curves)
     w = dict(zip(p.names, x, strict=True))
     assert w["F.a1"] * w["F.v1"] == pytest.approx(STICK_FRACTION * 2 * 0.5 / T, rel=1e-6)
+
+
+def test_identify_reports_the_curves_start_and_random_keeps_the_chart_start(record):
+    from flowchart2sdnn.identify.run import identify
+
+    diagram = diagram_from_text(chart(0.5), "chart.yaml")
+    stick = identify(diagram, record, seed=1, floor_bias=False)
+    assert stick.result["curve_start"]["curves"] == ["F"]
+    assert stick.result["settings"]["curve_start"] == "stick"
+    assert stick.result["curve_start"]["slope_limits"]["F"] == pytest.approx(2 * stick.result["parameters"]["J"]
+                                                                             ["value"] / T, rel=0.05)
+    random = identify(diagram, record, seed=1, floor_bias=False, curve_start="random")
+    assert "curve_start" not in random.result
+    # from random curves the fit's first cost is the chart's own start's
+    p = problem_of(chart(0.5), record)
+    e = p.residual(p.compiled.theta0())
+    assert random.optimizer.cost_history[0] == pytest.approx(0.5 * float(e @ e), rel=1e-9)
