@@ -26,6 +26,7 @@ shared 2-core machine). Measured (seed 1; more in docs/rough_init.md):
 | learned, 10 s, N = 4 (vs best truth start) | 0/4, 3 of 4 at the 1000 limit | 1/4, 258-337 | 0/4, 116-1000 |
 | learned, 10 s, N = 20, curves' stick-slip start (default) vs ``--variant random-curves`` | — | 20/20, median 450 (random curves: 0/20, 317) | — |
 | learned, 10 s, N = 10, ``--seed 2``, the same | — | 10/10, 8 of them at the 1000 limit (random curves: 0/10, all 10 at it) | — |
+| learned, 30 s, N = 4, the same | — | 4/4, all at the 1000 limit (random curves: 1/4, all at it) | — |
 
 ``--shooting L`` adds our default LM with multiple shooting (identify.shooting). learned, 10 s, N = 4, seed 1,
 ``--shooting 250`` (stages 250/1000/4000, then single shooting): 0/4 against 1/4 single shooting (costs 1.35-13.2
