@@ -50,10 +50,15 @@ __all__ = ["identify"]
                    "continuous oracle's noise-free run of the identified chart), widen each 95 % interval by "
                    "|beta| (the noise's alone: ci95_noise) and report the corrected values (RESULT.json "
                    "discretization.bias). Offline fits only (--online skips it).")
+@click.option("--curve-start", type=click.Choice(["stick", "random"]), default="stick", show_default=True,
+              help="Where learned curves without stored weights start: 'stick', for a curve in a feedback loop a "
+                   "stick-slip step at 0.3 of the slope the network's step allows, set after brief fits (at most "
+                   "150 iterations; docs/rough_init.md); 'random', the chart's seeded init_range weights. Offline fits only.")
 @click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
               help="Train on this leading fraction of DATA, validate on the rest.")
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Multi-start: number of seeded starts (the first is the chart's init); with --online, that many "
+              help="Multi-start: number of seeded starts (the first is the chart's init, its learned curves as "
+                   "--curve-start sets them); with --online, that many "
                    "quasi-online runs, the one with the lowest final window cost reported.")
 @seed_option("Seed for starts and initial curves.")
 @click.option("--online", is_flag=True, help="Quasi-online LM over a sliding window (paper section 3.1).")
@@ -75,7 +80,7 @@ __all__ = ["identify"]
 @click.option("--quiet", is_flag=True, help="No progress and no table.")
 @executor_options("the multi-start fits")
 @handle_errors
-def identify(data, chart, output, fix_from, validation, init_window, shooting, floor_bias, split, starts, seed, online, window, average,
+def identify(data, chart, output, fix_from, validation, init_window, shooting, floor_bias, curve_start, split, starts, seed, online, window, average,
              max_iter, alignment, substeps, mapping, units, plots, html_path, force, quiet, workers=None,
              scheduler=None) -> None:
     """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
@@ -115,7 +120,8 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, f
     with settings_usage():
         settings = IdentifySettings(starts=starts, seed=seed, max_iter=max_iter, alignment=alignment, split=split,
                                     online=online, window=window, average=average, fixed_from=tuple(fixed),
-                                    init_window=init_window or 0, shooting=shooting, floor_bias=floor_bias)
+                                    init_window=init_window or 0, shooting=shooting, floor_bias=floor_bias,
+                                    curve_start=curve_start)
     progress = Progress(quiet)
     ctrl_c = CtrlC()  # until the files are written: restored when the click context closes
     click.get_current_context().call_on_close(ctrl_c.restore)

@@ -31,6 +31,7 @@ from ..errors import SdnnError
 from ..executors import SerialExecutor
 from ..fit.lm import CONVERGED_STATUSES, LMOptions, LMResult
 from ..fit.multistart import draw_starts, run_multistart
+from .curvestart import curve_start
 from .evidence import assess, no_excitation_message, on_bound_warnings, sqrt_domain_warnings, start_stability
 from .floor import floor_warnings, measure_floor, oracle_runs
 from .floorbias import estimate_floor_bias, floor_bias_warnings
@@ -72,6 +73,7 @@ class _Outcome:
     online: object | None = None
     multistart: MultistartSummary | None = None
     multistart_warning: str | None = None
+    curve_start: dict | None = None
 
 
 @np.errstate(all="ignore")  # a diverging trial is expected and handled: no RuntimeWarnings on stderr
@@ -206,6 +208,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         problem=problem, x=x, lm=out.lm, online_run=out.online,
         extra={"discretization": disc,
                **({"shooting": shooting} if shooting else {}),
+               **({"curve_start": out.curve_start} if out.curve_start else {}),
                **({"initial_states": {"validation": state.to_dict()}} if state is not None else {}),
                **({"parameters_per_record": per_record} if per_record else {})},
     )
@@ -275,15 +278,27 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
 def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, progress, stop, executor) -> _Outcome:
     options = lm_options(settings, problem)
     shooting = 0 if settings.shooting == "off" else settings.shooting
-    starts = draw_starts(problem.names, x0, lower, upper, settings.starts, settings.seed,
-                         ranges=settings.ranges or None)
-    if executor is None:  # in this process: progress and Ctrl-C after every LM iteration
-        def callback(it, x, cost, mu):
-            if progress:
-                progress(f"LM iteration {it}, cost {cost:.6g}, mu {mu:.1e}",
-                         min(1.0, it / max(1, settings.max_iter)))
-            return bool(stop and stop())
 
+    def callback(it, x, cost, mu):
+        if progress:
+            progress(f"LM iteration {it}, cost {cost:.6g}, mu {mu:.1e}", min(1.0, it / max(1, settings.max_iter)))
+        return bool(stop and stop())
+
+    warm = None
+    if settings.curve_start == "stick":  # learned curves in a loop: a stick-slip step and a brief fit first
+        warm = curve_start(problem, x0, lower, upper, options, callback=callback if executor is None else None)
+    if warm is not None and warm.stopped is not None:  # Ctrl-C during the curves' brief fits
+        lm = warm.stopped
+        return _Outcome(np.asarray(lm.x, dtype=float), lm.status, lm.message, True, lm=lm,
+                        curve_start=warm.to_dict())
+    if warm is not None and warm.curves:
+        starts = draw_starts(problem.names, warm.template, lower, upper, settings.starts, settings.seed,
+                             ranges=settings.ranges or None)
+        starts[0] = warm.x
+    else:
+        starts = draw_starts(problem.names, x0, lower, upper, settings.starts, settings.seed,
+                             ranges=settings.ranges or None)
+    if executor is None:  # in this process: progress and Ctrl-C after every LM iteration
         fit_one = functools.partial(run_start, problem, lower=lower, upper=upper, options=options,
                                     callback=callback, shooting=shooting, threads=settings.threads)
     else:
@@ -301,7 +316,8 @@ def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, pro
     summary = _summary(ms, problem.names if settings.starts > 1 else None)
     return _Outcome(np.asarray(best.x, dtype=float), "interrupted" if interrupted else best.status, best.message,
                     interrupted, lm=best, multistart=summary,
-                    multistart_warning=ms.message if settings.starts > 1 and ms.local_minima else None)
+                    multistart_warning=ms.message if settings.starts > 1 and ms.local_minima else None,
+                    curve_start=warm.to_dict() if warm is not None and warm.curves else None)
 
 
 def _online(problem: Problem, x0, lower, upper, settings: IdentifySettings, progress, stop, executor) -> _Outcome:
