@@ -103,7 +103,7 @@ def run_one(key: str, noise: float, seed: int, seconds: float, settings: Diagnos
     rep = diagnose(chart, train, [val], settings).report
     wall = time.perf_counter() - t0
     first = rep["first_fit"]
-    return {"charts": charts, "plant": key, "noise": noise, "seed": seed, "seconds": seconds, "init_factors": factors,
+    return {"commit": _commit(), "charts": charts, "plant": key, "noise": noise, "seed": seed, "seconds": seconds, "init_factors": factors,
             "first_fit_converged": first["converged"], "first_fit_status": first["status"],
             "train_rms_before": rep["before"]["rms"],
             "stop": rep["stop"], "accepted": [f"{a['effect']}@{a['at']} ({a['label']})" for a in rep["accepted"]],
@@ -114,6 +114,17 @@ def run_one(key: str, noise: float, seed: int, seconds: float, settings: Diagnos
                                                "control")}
                        for r in rep["rounds"]],
             "substeps": (rep["final"].get("discretization") or {}).get("substeps")}
+
+
+def _commit() -> str:
+    """The code's git commit (``+`` when the work tree differs from it): which rule a stored run measured."""
+    import subprocess
+    try:
+        head = subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True)
+        dirty = subprocess.run(["git", "diff", "--quiet", "HEAD", "--", "flowchart2sdnn"], cwd=ROOT)
+        return head.stdout.strip() + ("+" if dirty.returncode else "")
+    except OSError:
+        return ""
 
 
 def _f(v, fmt=".4f") -> str:
