@@ -127,3 +127,38 @@ def test_an_unfinished_first_fit_gives_no_effect_the_credit():
     (entry,) = report["rounds"]
     assert entry["control"]["used_as_baseline"] is True
     assert "without any effect" in entry["reason"]
+
+
+def test_the_control_gets_the_growing_horizon_when_a_candidate_did(monkeypatch):
+    """A converged first fit in a local minimum (false-alarm bench, physical two-mass chart, noise 0.003, seed 2:
+    train RMS 0.52) was left by the growing-horizon refit of a scanned overflow limit; the control refitted only
+    on whole records stayed there, and the overflow took the credit. The control must get every start a candidate
+    got: with a candidate refitted on a growing horizon, the control's refit from the chart as given is also grown,
+    and it wins when it reaches the lower cost. The fits are stand-ins: their costs are the oracle."""
+    from types import SimpleNamespace
+
+    from flowchart2sdnn.diagnose import loop
+
+    grown_calls = []
+    ident = SimpleNamespace(status="converged")
+
+    def fake_fit_chart(diagram, train, records, settings, max_iter, dof, start, progress=None, accepted=()):
+        return Fitted(ident, 1.0, 100, 5, {}, start)
+
+    def fake_fit_growing(diagram, train, records, settings, max_iter, dof, start, accepted=()):
+        grown_calls.append((diagram, start))
+        return Fitted(ident, 0.5, 100, 5, {}, start)
+
+    monkeypatch.setattr(loop, "fit_chart", fake_fit_chart)
+    monkeypatch.setattr(loop, "fit_growing", fake_fit_growing)
+    current = Fitted(SimpleNamespace(status="converged", diagram="current chart"), 2.0, 100, 5, {})
+    settings = DiagnoseSettings()
+    plain = loop._control(current, "chart as given", [], [], settings, 0, [], None)
+    assert grown_calls == [] and plain.cost == 1.0
+    grown = loop._control(current, "chart as given", [], [], settings, 0, [], None, horizon=True)
+    assert grown_calls == [("chart as given", "control_horizon")]
+    assert grown.cost == 0.5 and grown.start == "control_horizon"
+    # horizon 0 (off) keeps it off for the control as for the candidates
+    grown_calls.clear()
+    loop._control(current, "chart as given", [], [], DiagnoseSettings(horizon=0), 0, [], None, horizon=True)
+    assert grown_calls == []
