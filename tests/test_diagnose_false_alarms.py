@@ -127,6 +127,10 @@ def test_an_unfinished_first_fit_gives_no_effect_the_credit():
     (entry,) = report["rounds"]
     assert entry["control"]["used_as_baseline"] is True
     assert "without any effect" in entry["reason"]
+    # the final chart is the same chart at the control's better point, not the unfinished first fit
+    assert entry["control"]["final"] is True
+    assert report["after"]["validation_rms"] == pytest.approx(entry["control"]["validation_rms"], rel=1e-9)
+    assert report["after"]["validation_rms"] < 0.5 * report["before"]["validation_rms"]
 
 
 def test_the_control_gets_the_growing_horizon_when_a_candidate_did(monkeypatch):

@@ -318,6 +318,11 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                 s, f = refits[0] if refits else (best[0], None)
                 rounds.append({**_round_entry(r, s, current, f, False, reason, settings), "control": control_entry})
                 stop_reason = "nothing_accepted"
+                if baseline is not current:
+                    # the same chart, refitted to a better point: the final chart is that fit, not the one the
+                    # round found stuck (a first fit in a local minimum would otherwise be the report's `after`)
+                    control_entry["final"] = True
+                    current = baseline
                 break
             s, f = choice
             c = s.candidate
@@ -421,12 +426,13 @@ def _control(current: Fitted, nominal_chart: Diagram, train: list[Dataset], reco
 
 
 def _control_entry(control: Fitted | None, used: bool) -> dict | None:
-    """REPORT.json's round `control`: the brief refit without any effect, and whether candidates were judged
-    against it (it validated better than the current fit)."""
+    """REPORT.json's round `control`: the brief refit without any effect, whether candidates were judged
+    against it (it validated better than the current fit), and whether it became the final fit (`final`: set by
+    the loop when nothing was accepted against it)."""
     if control is None:
         return None
     return {"start": control.start, "rms": finite_or_none(control.rms),
-            "validation_rms": finite_or_none(control.validation_rms), "used_as_baseline": used}
+            "validation_rms": finite_or_none(control.validation_rms), "used_as_baseline": used, "final": False}
 
 
 def _refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Dataset], records,
