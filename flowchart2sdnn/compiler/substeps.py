@@ -56,26 +56,55 @@ class SubstepChoice:
         text = f"substeps N = {self.substeps} (h = T/N = {h:g} s)"
         if (self.requested or DEFAULT_SUBSTEPS) == "auto":
             w = self.omega_max or 0.0
-            text += (f", auto{' (the default)' if self.requested is None else ''}: fastest mode at rest {w:.4g} rad/s ({w / (2 * math.pi):.4g} Hz), "
+            text += (f", auto{' (the default)' if self.requested is None else ''}: fastest mode (at rest or in a piecewise region) {w:.4g} rad/s ({w / (2 * math.pi):.4g} Hz), "
                      f"omega_max*h = {w * h:.3g} (bound {self.bound:g}, cap {AUTO_CAP})")
             if self.capped:
                 text += " -- the cap binds"
         return text
 
 
+#: the slopes a piecewise transfer takes in its regions: `sat` is 1 inside its limits and 0 beyond them
+REGION_SLOPES = {"sat": (0.0, 1.0)}
+
+
+def operating_slopes(net: Network) -> list[dict[int, float]]:
+    """The regions auto linearizes in besides rest: every piecewise neuron (REGION_SLOPES) at each of its
+    slopes, alone and all together.
+
+    Why: at rest a dead zone ``x - g sat(x / g)`` is slack (sat' = 1, the spring's torque has slope 0), yet in
+    contact (sat' = 0) the spring acts, and that mode is the fastest the drive reaches (the backlash bench:
+    none at rest, N = 1; sqrt(c (1/J1 + 1/J2)) = 61 rad/s in contact). A saturation's limit reached (slope 0)
+    cuts its loop. One at a time finds each region's mode, all together the fully engaged drive (two dead
+    zones in contact at once); taking the fastest over them can only raise N, never lower it.
+    """
+    piecewise = [(k, nr.transfer) for k, nr in enumerate(nr for la in net.layers for nr in la.neurons)
+                 if nr.transfer in REGION_SLOPES]
+    points: list[dict[int, float]] = []
+    for slope in sorted({s for _, t in piecewise for s in REGION_SLOPES[t]}):
+        together = {k: slope for k, t in piecewise if slope in REGION_SLOPES[t]}
+        points.append(together)
+        if len(together) > 1:
+            points += [{k: slope} for k in together]
+    return points
+
+
 def fastest_mode(net: Network) -> float:
-    """The largest continuous-time rate |log z| / h (rad/s) among the network's eigenvalues at rest.
+    """The largest continuous-time rate |log z| / h (rad/s) among the network's eigenvalues at rest and in
+    each region of its piecewise functions (:func:`operating_slopes`).
 
     Eigenvalues below ZERO_MODULUS are skipped: the companion matrix's delay lines (a delayed sum's or a delay
     block's memory) are zero eigenvalues that rounding spreads up to about 1e-5 (a defective block), and a mode
     that decays a thousandfold in one step is gone before the next sample whatever its error. An eigenvalue on the negative real axis (a network that already chatters) reads as
     pi / h, which asks for more steps, as it should.
     """
-    z = rest_eigenvalues(net, net.weight_values())
-    z = z[np.abs(z) > ZERO_MODULUS]
-    if z.size == 0:
-        return 0.0
-    return float(np.max(np.abs(np.log(z.astype(complex))))) / net.step
+    values = net.weight_values()
+    fastest = 0.0
+    for slopes in [None, *operating_slopes(net)]:
+        z = rest_eigenvalues(net, values, slopes)
+        z = z[np.abs(z) > ZERO_MODULUS]
+        if z.size:
+            fastest = max(fastest, float(np.max(np.abs(np.log(z.astype(complex))))) / net.step)
+    return fastest
 
 
 def substeps_for(omega: float, sample_time: float, bound: float = AUTO_BOUND) -> tuple[int, bool]:
