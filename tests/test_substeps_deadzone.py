@@ -17,6 +17,8 @@ import scipy.linalg
 
 from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.compiler.substeps import AUTO_BOUND
+from flowchart2sdnn.diagnose.graph import Place
+from flowchart2sdnn.diagnose.overflow import Level, Overflow
 from flowchart2sdnn.diagram.validate import diagram_from_text
 
 T = 0.001
@@ -119,3 +121,13 @@ def test_three_masses_read_with_both_dead_zones_closed():
     choice, n = _auto(THREE_MASS)
     assert n == expected
     assert choice.omega_max == pytest.approx(omega, rel=0.02)
+
+
+def test_an_overflow_stop_is_not_read_as_a_mode_to_resolve():
+    """diagnose's overflow stop is a clip resting beyond its limits with a stiffness 1/T that acts within one
+    step by design: N stays the shaft's, not the cap."""
+    diagram = diagram_from_text(TWO_MASS.format(substeps="auto", c=477.2), "chart.yaml")
+    omega = math.sqrt(477.2 * (1 / 0.2 + 1 / 0.4))
+    for at in ("w1", "x", "w2"):
+        patched = Overflow().patch(diagram, Place(at, "state"), Level(1, 2.0, None, 5.0))
+        assert compile_diagram(patched).network.substeps == math.ceil(omega * T / AUTO_BOUND)

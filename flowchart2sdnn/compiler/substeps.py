@@ -3,8 +3,9 @@
 The paper's scheme (implicit Euler forward, one step of delay in every feedback loop) is first order: a mode of
 angular frequency w is carried with a phase and amplitude error of about w*h/2 per unit of its own amplitude.
 `auto` linearizes the compiled network at rest (:func:`flowchart2sdnn.network.stability.rest_eigenvalues`, the
-chatter guard's matrix), reads each eigenvalue z as a continuous rate |log z| / h, and picks the smallest N
-with w_max * T / N <= AUTO_BOUND. The bound is measured, not derived: on the two- and three-mass benches
+chatter guard's matrix) and in each region of its piecewise functions (:func:`operating_slopes`: a dead zone
+is slack at rest but in contact while the drive runs), reads each eigenvalue z as a continuous rate
+|log z| / h, and picks the smallest N with w_max * T / N <= AUTO_BOUND, w_max the fastest over them. The bound is measured, not derived: on the two- and three-mass benches
 (`benchmarks/bench_substeps.py`, `delays: torques`) w*h <= 0.01 keeps every speed within 0.06 % of its RMS
 (0.0025 rad/s at most on speeds of 3-5 rad/s RMS); 0.02 left the three-mass motor speed at 0.13 %. N is capped at AUTO_CAP; when the cap binds
 (a steep friction curve at zero speed reads as a very fast mode) a warning says so.
@@ -47,7 +48,7 @@ class SubstepChoice:
 
     substeps: int
     requested: int | str | None
-    omega_max: float | None = None  # rad/s, the fastest mode at rest (auto only)
+    omega_max: float | None = None  # rad/s, the fastest mode at rest or in a piecewise region (auto only)
     capped: bool = False
     bound: float = AUTO_BOUND  # auto's bound on omega_max * h
 
@@ -63,18 +64,21 @@ class SubstepChoice:
         return text
 
 
-#: the slopes a piecewise transfer takes in its regions: `sat` is 1 inside its limits and 0 beyond them
-REGION_SLOPES = {"sat": (0.0, 1.0)}
+#: the slopes auto reads a piecewise transfer at besides its slope at rest: `sat` beyond its limits (0). Not
+#: its inner slope 1: a chart at rest inside the limits has it already, and a clip that rests beyond them is
+#: diagnose's overflow stop (diagnose.overflow), a stiffness K = 1/T meant to act within one step, not a mode
+#: to resolve (read at slope 1 it asked for the cap, N = 32, on the two-mass drive with a stop on any state)
+REGION_SLOPES = {"sat": (0.0,)}
 
 
 def operating_slopes(net: Network) -> list[dict[int, float]]:
     """The regions auto linearizes in besides rest: every piecewise neuron (REGION_SLOPES) at each of its
-    slopes, alone and all together.
+    region slopes, alone and all together.
 
     Why: at rest a dead zone ``x - g sat(x / g)`` is slack (sat' = 1, the spring's torque has slope 0), yet in
     contact (sat' = 0) the spring acts, and that mode is the fastest the drive reaches (the backlash bench:
     none at rest, N = 1; sqrt(c (1/J1 + 1/J2)) = 61 rad/s in contact). A saturation's limit reached (slope 0)
-    cuts its loop. One at a time finds each region's mode, all together the fully engaged drive (two dead
+    cuts its loop (a slower mode, harmless). One at a time finds each region's mode, all together the fully engaged drive (two dead
     zones in contact at once); taking the fastest over them can only raise N, never lower it.
     """
     piecewise = [(k, nr.transfer) for k, nr in enumerate(nr for la in net.layers for nr in la.neurons)
