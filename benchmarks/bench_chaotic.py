@@ -10,7 +10,7 @@ For each plant and each --shooting setting: validation RMS per output (acceptanc
 the linear parameters' errors (acceptance: within 2 %), the length of the stage kept (`final_length`; the
 whole record when single shooting) and the wall time. The identify runs are the CLI's, with --no-floor-bias.
 
-Run from the repository root: `python benchmarks/bench_chaotic.py [SHOOTING ...] [--substeps N]`
+Run from the repository root: `python benchmarks/bench_chaotic.py [SHOOTING ...] [--substeps N] [--plant NAME]`
 (default settings: off auto 200; each run takes 0.5-2.5 min on this machine, two cores shared).
 """
 
@@ -50,11 +50,13 @@ def _with_inits(text: str, factors: dict, set_value: dict | None = None) -> str:
     return text
 
 
-def main(settings: list[str], substeps: str | None) -> None:
+def main(settings: list[str], substeps: str | None, plants: list[str] | None = None) -> None:
     tmp = Path(tempfile.mkdtemp(prefix="bench_chaotic_"))
     print(f"{'plant':9} {'shooting':8} {'val RMS w1':>10} {'val RMS w2':>10} {'max lin err %':>13} "
           f"{'kept L':>7} {'s':>6}")
     for name, (path, effect, amplitude) in PLANTS.items():
+        if plants and name not in plants:
+            continue
         text = path.read_text()
         plant_text = _with_inits(text, {}, {effect: amplitude} if amplitude is not None else None)
         plant = tmp / f"{name}_plant.yaml"
@@ -84,4 +86,9 @@ if __name__ == "__main__":
         i = args.index("--substeps")
         n = args[i + 1]
         del args[i:i + 2]
-    main(args or ["off", "auto", "200"], n)
+    chosen = []
+    while "--plant" in args:
+        i = args.index("--plant")
+        chosen.append(args[i + 1])
+        del args[i:i + 2]
+    main(args or ["off", "auto", "200"], n, chosen or None)

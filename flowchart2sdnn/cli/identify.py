@@ -45,6 +45,9 @@ __all__ = ["identify"]
               help="Set the validation record's initial state from its first N samples (parameters fixed), then "
                    "run free; scored from row N (EMPS: 20, CED: 4, Cascaded Tanks: 5).")
 @shooting_option()
+@click.option("--shooting-starts", type=click.Choice(["data", "free"]), default="data", show_default=True,
+              help="Multiple shooting: measured states start each segment from the data's sample ('data') or are "
+                   "fitted like the unmeasured ones from it ('free': a noisy sample is a poor start).")
 @click.option("--floor-bias/--no-floor-bias", default=True, show_default=True,
               help="Estimate the discretization's bias beta on each parameter (the network refitted to the "
                    "continuous oracle's noise-free run of the identified chart), widen each 95 % interval by "
@@ -80,7 +83,7 @@ __all__ = ["identify"]
 @click.option("--quiet", is_flag=True, help="No progress and no table.")
 @executor_options("the multi-start fits")
 @handle_errors
-def identify(data, chart, output, fix_from, validation, init_window, shooting, floor_bias, curve_start, split, starts, seed, online, window, average,
+def identify(data, chart, output, fix_from, validation, init_window, shooting, shooting_starts, floor_bias, curve_start, split, starts, seed, online, window, average,
              max_iter, alignment, substeps, mapping, units, plots, html_path, force, quiet, workers=None,
              scheduler=None) -> None:
     """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
@@ -120,7 +123,8 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, f
     with settings_usage():
         settings = IdentifySettings(starts=starts, seed=seed, max_iter=max_iter, alignment=alignment, split=split,
                                     online=online, window=window, average=average, fixed_from=tuple(fixed),
-                                    init_window=init_window or 0, shooting=shooting, floor_bias=floor_bias,
+                                    init_window=init_window or 0, shooting=shooting,
+                                    shooting_starts=shooting_starts, floor_bias=floor_bias,
                                     curve_start=curve_start)
     progress = Progress(quiet)
     ctrl_c = CtrlC()  # until the files are written: restored when the click context closes

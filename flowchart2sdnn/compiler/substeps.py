@@ -3,8 +3,9 @@
 The paper's scheme (implicit Euler forward, one step of delay in every feedback loop) is first order: a mode of
 angular frequency w is carried with a phase and amplitude error of about w*h/2 per unit of its own amplitude.
 `auto` linearizes the compiled network at rest (:func:`flowchart2sdnn.network.stability.rest_eigenvalues`, the
-chatter guard's matrix), reads each eigenvalue z as a continuous rate |log z| / h, and picks the smallest N
-with w_max * T / N <= AUTO_BOUND. The bound is measured, not derived: on the two- and three-mass benches
+chatter guard's matrix) and in each region of its piecewise functions (:func:`operating_slopes`: a dead zone
+is slack at rest but in contact while the drive runs), reads each eigenvalue z as a continuous rate
+|log z| / h, and picks the smallest N with w_max * T / N <= AUTO_BOUND, w_max the fastest over them. The bound is measured, not derived: on the two- and three-mass benches
 (`benchmarks/bench_substeps.py`, `delays: torques`) w*h <= 0.01 keeps every speed within 0.06 % of its RMS
 (0.0025 rad/s at most on speeds of 3-5 rad/s RMS); 0.02 left the three-mass motor speed at 0.13 %. N is capped at AUTO_CAP; when the cap binds
 (a steep friction curve at zero speed reads as a very fast mode) a warning says so.
@@ -47,7 +48,7 @@ class SubstepChoice:
 
     substeps: int
     requested: int | str | None
-    omega_max: float | None = None  # rad/s, the fastest mode at rest (auto only)
+    omega_max: float | None = None  # rad/s, the fastest mode at rest or in a piecewise region (auto only)
     capped: bool = False
     bound: float = AUTO_BOUND  # auto's bound on omega_max * h
 
@@ -56,26 +57,58 @@ class SubstepChoice:
         text = f"substeps N = {self.substeps} (h = T/N = {h:g} s)"
         if (self.requested or DEFAULT_SUBSTEPS) == "auto":
             w = self.omega_max or 0.0
-            text += (f", auto{' (the default)' if self.requested is None else ''}: fastest mode at rest {w:.4g} rad/s ({w / (2 * math.pi):.4g} Hz), "
+            text += (f", auto{' (the default)' if self.requested is None else ''}: fastest mode (at rest or in a piecewise region) {w:.4g} rad/s ({w / (2 * math.pi):.4g} Hz), "
                      f"omega_max*h = {w * h:.3g} (bound {self.bound:g}, cap {AUTO_CAP})")
             if self.capped:
                 text += " -- the cap binds"
         return text
 
 
+#: the slopes auto reads a piecewise transfer at besides its slope at rest: `sat` beyond its limits (0). Not
+#: its inner slope 1: a chart at rest inside the limits has it already, and a clip that rests beyond them is
+#: diagnose's overflow stop (diagnose.overflow), a stiffness K = 1/T meant to act within one step, not a mode
+#: to resolve (read at slope 1 it asked for the cap, N = 32, on the two-mass drive with a stop on any state)
+REGION_SLOPES = {"sat": (0.0,)}
+
+
+def operating_slopes(net: Network) -> list[dict[int, float]]:
+    """The regions auto linearizes in besides rest: every piecewise neuron (REGION_SLOPES) at each of its
+    region slopes, alone and all together.
+
+    Why: at rest a dead zone ``x - g sat(x / g)`` is slack (sat' = 1, the spring's torque has slope 0), yet in
+    contact (sat' = 0) the spring acts, and that mode is the fastest the drive reaches (the backlash bench:
+    none at rest, N = 1; sqrt(c (1/J1 + 1/J2)) = 61 rad/s in contact). A saturation's limit reached (slope 0)
+    cuts its loop (a slower mode, harmless). One at a time finds each region's mode, all together the fully engaged drive (two dead
+    zones in contact at once); taking the fastest over them can only raise N, never lower it.
+    """
+    piecewise = [(k, nr.transfer) for k, nr in enumerate(nr for la in net.layers for nr in la.neurons)
+                 if nr.transfer in REGION_SLOPES]
+    points: list[dict[int, float]] = []
+    for slope in sorted({s for _, t in piecewise for s in REGION_SLOPES[t]}):
+        together = {k: slope for k, t in piecewise if slope in REGION_SLOPES[t]}
+        points.append(together)
+        if len(together) > 1:
+            points += [{k: slope} for k in together]
+    return points
+
+
 def fastest_mode(net: Network) -> float:
-    """The largest continuous-time rate |log z| / h (rad/s) among the network's eigenvalues at rest.
+    """The largest continuous-time rate |log z| / h (rad/s) among the network's eigenvalues at rest and in
+    each region of its piecewise functions (:func:`operating_slopes`).
 
     Eigenvalues below ZERO_MODULUS are skipped: the companion matrix's delay lines (a delayed sum's or a delay
     block's memory) are zero eigenvalues that rounding spreads up to about 1e-5 (a defective block), and a mode
     that decays a thousandfold in one step is gone before the next sample whatever its error. An eigenvalue on the negative real axis (a network that already chatters) reads as
     pi / h, which asks for more steps, as it should.
     """
-    z = rest_eigenvalues(net, net.weight_values())
-    z = z[np.abs(z) > ZERO_MODULUS]
-    if z.size == 0:
-        return 0.0
-    return float(np.max(np.abs(np.log(z.astype(complex))))) / net.step
+    values = net.weight_values()
+    fastest = 0.0
+    for slopes in [None, *operating_slopes(net)]:
+        z = rest_eigenvalues(net, values, slopes)
+        z = z[np.abs(z) > ZERO_MODULUS]
+        if z.size:
+            fastest = max(fastest, float(np.max(np.abs(np.log(z.astype(complex))))) / net.step)
+    return fastest
 
 
 def substeps_for(omega: float, sample_time: float, bound: float = AUTO_BOUND) -> tuple[int, bool]:

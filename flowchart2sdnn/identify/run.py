@@ -228,6 +228,7 @@ def _shooting(settings: IdentifySettings, lm: LMResult | None, auto=None) -> dic
     stages = [{k: None if isinstance(v, float) and not np.isfinite(v) else v for k, v in s.items()}
               for s in lm.stages] if lm is not None else []  # a diverged stage's cost is inf: JSON has no inf
     out = {"length": settings.shooting, "requested": "auto" if auto is not None else settings.shooting,
+           "starts": settings.shooting_starts,
            **({"auto": auto.to_dict()} if auto is not None else {}), "stages": stages,
            "method": "multiple shooting, segments merged x4, continuity weight x10 per stage, then single "
                      "shooting over whole records (the result, unless it costs more than 1.44x per sample than "
@@ -300,9 +301,11 @@ def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, pro
                              ranges=settings.ranges or None)
     if executor is None:  # in this process: progress and Ctrl-C after every LM iteration
         fit_one = functools.partial(run_start, problem, lower=lower, upper=upper, options=options,
-                                    callback=callback, shooting=shooting, threads=settings.threads)
+                                    callback=callback, shooting=shooting, threads=settings.threads,
+                                    shooting_starts=settings.shooting_starts)
     else:
-        fit_one = functools.partial(fit_start, fit_task(problem, lower, upper, options, shooting))
+        fit_one = functools.partial(fit_start, fit_task(problem, lower, upper, options, shooting,
+                                                        settings.shooting_starts))
 
     def start_done(i, result):
         if progress and settings.starts > 1:

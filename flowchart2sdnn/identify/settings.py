@@ -11,7 +11,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
-__all__ = ["IdentifySettings", "SHOOTING", "IDENTIFY_TAU", "REFIT_TAU", "ONLINE_TAU", "MIN_REL_COST_CHANGE",
+__all__ = ["IdentifySettings", "SHOOTING", "SHOOTING_STARTS", "IDENTIFY_TAU", "REFIT_TAU", "ONLINE_TAU", "MIN_REL_COST_CHANGE",
            "CONVERGED_DECREASE", "IDENTIFY_SCALE", "FLOOR_BIAS", "CURVE_START"]
 
 #: First LM damping mu = tau * max diag(JᵀJ) (Madsen-Nielsen-Tingleff) for a fit from a chart's rough `init`:
@@ -45,6 +45,11 @@ CONVERGED_DECREASE = 0.01
 #: probe 1.6 s of 458 s. diagnose keeps "off" (diagnose.fitting.DiagnoseSettings): its acceptance and benches
 #: were measured single shooting.
 SHOOTING = "auto"
+#: where multiple shooting's segments start the measured states: "data" (the sample before the segment, the
+#: default) or "free" (fitted like the unmeasured ones, starting from that sample). Measured on the backlash
+#: bench (README, Multiple shooting): a noisy sample as a start keeps short segments off the noise floor (the
+#: truth's 200 stage 1.4x the noise with "data", 1.0x with "free"); opt-in until it is measured more widely
+SHOOTING_STARTS = "data"
 #: identify estimates the discretization's bias on each parameter and widens ci95 by it (identify.floorbias): with
 #: 0.01 rad/s noise (Coulomb benches, auto N, seeds 1-10) the noise-only intervals covered the truth 8 in 10 times
 #: for 13 of 21 parameters (three-mass c1 3 of 10), the widened ones for 21 of 21, at x1.24-1.33 the fit's time
@@ -91,6 +96,7 @@ class IdentifySettings:
                              a merge that raises the cost per sample more than MERGE_RISE is refused and the
                              stage before is the result); "off": single shooting only; "auto": L or off chosen
                              from how fast a moved start grows along the records (identify.shootauto)
+    shooting_starts : str    "data" or "free": the measured states' start at each segment (:data:`SHOOTING_STARTS`)
     threads : int            threads for multiple shooting's segments within one fit in this process (the kernels
                              release the GIL); fits in worker processes (an executor) use one
     floor_bias : bool        estimate the discretization's bias beta on each parameter by refitting the network to
@@ -118,6 +124,7 @@ class IdentifySettings:
     converged_decrease: float = CONVERGED_DECREASE
     init_window: int = 0
     shooting: str | int = SHOOTING
+    shooting_starts: str = SHOOTING_STARTS
     floor_bias: bool = FLOOR_BIAS
     threads: int = 1
     curve_start: str = CURVE_START
@@ -140,6 +147,8 @@ class IdentifySettings:
         _need(self.shooting in ("off", "auto") or (isinstance(self.shooting, int) and not isinstance(self.shooting, bool)
                                           and self.shooting >= 2),
               f"shooting must be 'off', 'auto' or a segment length of at least 2 samples, got {self.shooting!r}")
+        _need(self.shooting_starts in ("data", "free"),
+              f"shooting_starts must be 'data' or 'free', got {self.shooting_starts!r}")
         _need(not (self.online and self.shooting not in ("off", "auto")),  # auto: off for the window
               "shooting applies to offline fits, not to the quasi-online window")
         _need(isinstance(self.threads, int) and not isinstance(self.threads, bool) and self.threads >= 1,

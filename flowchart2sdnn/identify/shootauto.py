@@ -14,7 +14,7 @@ The rule. The chart at its `init` is run over every training record from the rec
 again once per integrator state with that state's start moved by DELTA times the state's RMS over the run. The
 amplification a(t) is the largest deviation of any state at t, in units of its own RMS, divided by DELTA. A
 stable drive forgets the moved start (a(t) stays of order 1: over the test suite's 161 fits on records longer
-than 100 samples its peak had median 1.0, 95th percentile 3.9, largest 8.0, and 12 on the backlash chart at its
+than 100 samples its peak had median 1.0, 95th percentile 3.9, largest 8.0, and 12 on the backlash chart (N = 1) at its
 rough init, where a moved speed shows in the small shaft twist); a chaotic one amplifies it exponentially. The
 predictable horizon H is the first sample where a(t) reaches GROWTH_BOUND:
 

@@ -107,7 +107,7 @@ class Segmented:
     """
 
     def __init__(self, problem: Problem, length: int, weight: float, scale: np.ndarray | None = None,
-                 threads: int = 1):
+                 threads: int = 1, starts: str = "data"):
         self.problem = problem
         self.threads = max(1, int(threads))
         compiled = problem.compiled
@@ -120,6 +120,10 @@ class Segmented:
         self.n_theta = compiled.n_theta
         measured = {int(k): i for i, k in enumerate(compiled.flat.output_index)}
         states = state_neurons(compiled)
+        if starts == "free":  # measured states too: a noisy sample is a poor start (see SHOOTING_STARTS)
+            measured, self.data_starts = {}, [(j, measured[k]) for j, (k, _) in enumerate(states) if k in measured]
+        else:
+            self.data_starts = []
         self.free = np.array([k for k, _ in states if k not in measured], dtype=np.int64)
         self.free_names = tuple(name for k, name in states if k not in measured)
         self.measured = [(k, measured[k]) for k, _ in states if k in measured]
@@ -264,6 +268,9 @@ class Segmented:
             if p.column >= 0:
                 key = (p.record, p.a)
                 x[p.column:p.column + len(self.free)] = carried[key] if carried and key in carried else prev
+                if not (carried and key in carried):  # free measured states start from the data
+                    for j, o in self.data_starts:
+                        x[p.column + j] = self.problem.segments[p.record].targets[p.a - 1, o]
             if len(self.free):
                 seg = self.problem.segments[p.record]
                 with _interruptible():
@@ -313,7 +320,7 @@ def _state_scale(problem: Problem, theta: np.ndarray, free: np.ndarray) -> np.nd
 
 
 def shooting_fit(problem: Problem, start: np.ndarray, lower, upper, options: LMOptions, length: int,
-                 callback=None, guard=None, threads: int = 1) -> LMResult:
+                 callback=None, guard=None, threads: int = 1, starts: str = "data") -> LMResult:
     """Multiple-shooting stages from `start`, then single shooting (problem.fun) from their result.
 
     Returns the last accepted stage's LMResult (the result: single shooting unless a merge was refused, see the
@@ -329,7 +336,7 @@ def shooting_fit(problem: Problem, start: np.ndarray, lower, upper, options: LMO
     before = None  # (output cost per sample, the stage's result in theta's terms) of the last accepted stage
     floor = 0.5 * NOISE_MARGIN ** 2 * noise_level(problem)  # a stage's cost per sample at the noise floor
     for i, L in enumerate(lengths):
-        seg = Segmented(problem, L, WEIGHT_GROWTH ** i, scale, threads)
+        seg = Segmented(problem, L, WEIGHT_GROWTH ** i, scale, threads, starts)
         if scale is None:  # the states' sizes at the start, kept over the stages (the weights grow alone)
             scale = seg.scale = _state_scale(problem, theta, seg.free)
             seg.row_weight = seg.weight * np.sqrt(seg.length) / scale

@@ -53,6 +53,7 @@ class FitTask:
     key : str               sha256 of the network file and the problem fields: the worker's cache key
                             (bounds and options are not cached, they travel with every unit)
     shooting : int          multiple-shooting segment length (0: single shooting; identify.shooting)
+    shooting_starts : str   "data" or "free": the measured states' segment starts (identify.shooting)
     """
 
     network_json: str
@@ -63,9 +64,11 @@ class FitTask:
     options: Any  # LMOptions or fit.online.OnlineOptions
     key: str
     shooting: int = 0
+    shooting_starts: str = "data"
 
 
-def fit_task(problem, lower: np.ndarray, upper: np.ndarray, options: Any, shooting: int = 0) -> FitTask:
+def fit_task(problem, lower: np.ndarray, upper: np.ndarray, options: Any, shooting: int = 0,
+             shooting_starts: str = "data") -> FitTask:
     """The work unit of a multi-start fit of ``problem`` (an identify.problem.Problem).
 
     Every field of the Problem but the chart and the compiled network travels as it is, so that the worker's
@@ -76,7 +79,7 @@ def fit_task(problem, lower: np.ndarray, upper: np.ndarray, options: Any, shooti
     h = hashlib.sha256(text.encode())
     h.update(pickle.dumps(fields, protocol=pickle.HIGHEST_PROTOCOL))
     return FitTask(text, fields, tuple(problem.names), np.array(lower, dtype=float), np.array(upper, dtype=float),
-                   options, h.hexdigest(), shooting)
+                   options, h.hexdigest(), shooting, shooting_starts)
 
 
 _cache: OrderedDict[str, Any] = OrderedDict()
@@ -108,7 +111,8 @@ def problem_of(task: FitTask):
 
 
 def run_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, options,
-              callback: Callable | None = None, shooting: int = 0, threads: int = 1) -> LMResult:
+              callback: Callable | None = None, shooting: int = 0, threads: int = 1,
+              shooting_starts: str = "data") -> LMResult:
     """Levenberg-Marquardt from ``start`` on ``problem``: the one way a start is fitted, serial or in a worker.
 
     Parameters
@@ -123,11 +127,13 @@ def run_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, 
         > 0: multiple shooting with segments of this many samples first (identify.shooting.shooting_fit).
     threads : int
         threads for multiple shooting's segments.
+    shooting_starts : str
+        "data": measured states start each segment from the data; "free": they are free too (identify.shooting).
     """
     own = problem.from_start(start)
     if shooting:
         return shooting_fit(own, np.asarray(start, dtype=float), lower, upper, options, shooting,
-                            callback=callback, guard=own.guard, threads=threads)
+                            callback=callback, guard=own.guard, threads=threads, starts=shooting_starts)
     return levenberg_marquardt(own.fun, np.asarray(start, dtype=float), problem.names, lower, upper, options,
                                callback=callback, guard=own.guard, residual=own.residual)
 
@@ -144,7 +150,8 @@ def fit_start(task: FitTask, start: np.ndarray) -> LMResult:
     -------
     LMResult
     """
-    return run_start(problem_of(task), start, task.lower, task.upper, task.options, shooting=task.shooting)
+    return run_start(problem_of(task), start, task.lower, task.upper, task.options, shooting=task.shooting,
+                     shooting_starts=task.shooting_starts)
 
 
 def run_quasi_online_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, options,

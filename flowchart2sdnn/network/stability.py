@@ -50,11 +50,13 @@ def _derivative(transfer: str, n: float) -> float:
 
 
 @np.errstate(all="ignore")  # overflowing weights are handled: they give an unbounded radius, not warnings
-def rest_eigenvalues(net: Network, values: np.ndarray) -> np.ndarray:
+def rest_eigenvalues(net: Network, values: np.ndarray, slopes: dict[int, float] | None = None) -> np.ndarray:
     """Eigenvalues of the network linearized at rest, for weight values `values` (Network.weights order).
 
     A product neuron's row holds its partial derivatives at rest, w_c times the other factors (zero when two
-    factors are signals at rest: a product of two states has no linear part there).
+    factors are signals at rest: a product of two states has no linear part there). `slopes` (flat neuron
+    index -> f') replaces the transfer's slope at rest for those neurons: the network linearized in another
+    region of a piecewise function (a dead zone in contact), as the sub-steps' auto reads it.
     """
     offsets = np.cumsum([0] + [la.size for la in net.layers])
     n = int(offsets[-1])
@@ -88,6 +90,8 @@ def rest_eigenvalues(net: Network, values: np.ndarray) -> np.ndarray:
             nrest[k] = bias[k] + L[0, k] @ a
         a[k] = _value(transfers[k], nrest[k])
     D = np.array([_derivative(t, float(x)) for t, x in zip(transfers, nrest, strict=True)], dtype=float)
+    for k, slope in (slopes or {}).items():
+        D[k] = slope
     M = np.eye(n) - D[:, None] * L[0]
     unbounded = np.array([np.inf])  # what a network without a finite linearisation at rest is treated as
     try:
