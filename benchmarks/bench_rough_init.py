@@ -57,12 +57,14 @@ from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
 from flowchart2sdnn.identify.curvestart import curve_start  # noqa: E402
 from flowchart2sdnn.identify.problem import build_problem  # noqa: E402
-from flowchart2sdnn.identify.run import lm_options  # noqa: E402
+from flowchart2sdnn.identify.run import identify, lm_options  # noqa: E402
 from flowchart2sdnn.identify.settings import IdentifySettings  # noqa: E402
 from flowchart2sdnn.identify.workers import run_start  # noqa: E402
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
 
-CHARTS = {"learned": ("two_mass", "two_mass_plant"), "coulomb": ("two_mass_coulomb", "two_mass_coulomb_plant")}
+CHARTS = {"learned": ("two_mass", "two_mass_plant"), "coulomb": ("two_mass_coulomb", "two_mass_coulomb_plant"),
+          "three-learned": ("three_mass_learned", "three_mass_stribeck_plant"),
+          "three-physical": ("three_mass_physical", "three_mass_stribeck_wide_plant")}
 #: our LM with one change each; "default" is identify's default
 #: ("curve_start": "random" starts the learned curves from the chart's seeded weights, the default before
 #: identify.curvestart; every other key is an LMOptions field)
@@ -72,6 +74,7 @@ VARIANTS = {
     "noscale": {"scale": "none"},
     "jac-per-weight": {"scale": "jac", "scale_groups": ()},
     "tau0": {"tau": 0.0},
+    "identify": {},  # identify() itself, every default (substeps, shooting auto, curves' start): fit_identify
 }
 FACTOR = 3.0
 GLOBAL = 1.05
@@ -115,6 +118,19 @@ def fit_ours(chart, data, variant: dict, seed: int, shooting: int = 0):
     r = run_start(problem, x0, lo, hi, opts, shooting=shooting)
     iterations = brief + r.iterations + sum(s["iterations"] for s in r.stages[:-1])  # every stage's (shooting)
     return problem, r.x, r.cost, time.perf_counter() - t0, iterations, r.status
+
+
+def fit_identify(chart, data, seed: int):
+    """One default `identify` run (what a user gets: shooting auto, the curves' start, the stability check)."""
+    t0 = time.perf_counter()
+    out = identify(chart, data, settings=IdentifySettings(seed=seed))
+    secs = time.perf_counter() - t0
+    lm = out.lm
+    brief = (out.extra.get("curve_start") or {}).get("iterations", 0)
+    iterations = brief + lm.iterations + sum(s["iterations"] for s in lm.stages[:-1])
+    values = {n: e.value for n, e in out.parameters.items() if n in out.problem.names}
+    status = f"{lm.status}{'' if out.converged else ' (NOT conv.)'}"
+    return out.problem, np.array(list(values.values())), float(lm.cost), secs, iterations, status, values
 
 
 def fit_trf(chart, data, seed: int):
@@ -168,6 +184,9 @@ def main() -> None:
         runs["trf"] = []
     ref = []
     for name in variants:
+        if name == "identify":
+            ref.append(fit_identify(truth_chart(chart, truth), data, args.seed)[2])
+            continue
         ref.append(fit_ours(truth_chart(chart, truth), data, VARIANTS[name], args.seed)[2])
     if not args.no_trf:
         ref.append(fit_trf(truth_chart(chart, truth), data, args.seed)[2])
@@ -176,24 +195,33 @@ def main() -> None:
         for name in runs:  # interleaved: every method on draw i before draw i + 1 (fair under shared load)
             if name == "trf":
                 out = fit_trf(rough, data, args.seed)
+            elif name == "identify":
+                out = fit_identify(rough, data, args.seed)
             elif name.startswith("shoot-"):
                 out = fit_ours(rough, data, VARIANTS["default"], args.seed, int(name[6:]))
             else:
                 out = fit_ours(rough, data, VARIANTS[name], args.seed)
-            problem, x, cost, secs, evals, status = out
-            values = dict(zip(problem.names, x, strict=True))
+            problem, x, cost, secs, evals, status = out[:6]
+            values = out[6] if len(out) > 6 else dict(zip(problem.names, x, strict=True))
             runs[name].append((cost, secs, evals, status, values))
             errs = " ".join(f"{k} {100 * (values[k] / truth[k] - 1):+.1f}%" for k in values if k in truth)
+            worst = max((abs(values[k] / truth[k] - 1) for k in values if k in truth), default=0.0)
+            runs[name][-1] += (worst,)
             print(f"draw {i} {name:10s} cost {cost:10.4g} {secs:6.1f} s {evals:4d} it/ev {status:18s} {errs}",
                   flush=True)
     best = min([*ref] + [r[0] for rs in runs.values() for r in rs])
     print(f"\nreference cost {best:.6g} (truth starts: {', '.join(f'{c:.6g}' for c in ref)})\n")
-    print("| optimizer | global minimum (cost <= 1.05x ref) | median s per fit | median iterations/evaluations |")
-    print("|---|---|---|---|")
+    print("| optimizer | global minimum (cost <= 1.05x ref) | costs | median s per fit | median iterations/evaluations "
+          "(range) | converged | median (max) worst physical error |")
+    print("|---|---|---|---|---|---|---|")
     for name, rs in runs.items():
         hit = sum(r[0] <= GLOBAL * best for r in rs)
-        print(f"| {name} | {hit}/{len(rs)} | {np.median([r[1] for r in rs]):.1f} | "
-              f"{np.median([r[2] for r in rs]):.0f} |")
+        conv = sum("NOT" not in r[3] and r[3] != "max_iter" for r in rs)
+        its = [r[2] for r in rs]
+        worst = [100 * r[5] for r in rs]
+        print(f"| {name} | {hit}/{len(rs)} | {min(r[0] for r in rs):.4g}-{max(r[0] for r in rs):.4g} | "
+              f"{np.median([r[1] for r in rs]):.1f} | {np.median(its):.0f} ({min(its)}-{max(its)}) | "
+              f"{conv}/{len(rs)} | {np.median(worst):.1f} % ({max(worst):.1f} %) |")
 
 
 if __name__ == "__main__":
