@@ -28,6 +28,16 @@ shared 2-core machine). Measured (seed 1; more in docs/rough_init.md):
 | learned, 10 s, N = 10, ``--seed 2``, the same | — | 10/10, 8 of them at the 1000 limit (random curves: 0/10, all 10 at it) | — |
 | learned, 30 s, N = 4, the same | — | 4/4, all at the 1000 limit (random curves: 1/4, all at it) | — |
 
+Three-mass drive (``--chart three-physical``: three_mass_physical.yaml on three_mass_stribeck_wide_plant.yaml;
+``--chart three-learned``: three_mass_learned.yaml on three_mass_stribeck_plant.yaml), ``--variant identify
+--no-trf`` (one `identify()` call with every default: shooting auto, sub-steps auto, the curves' start), 10 s,
+seed 1 (the issue's ≥ 18/20):
+
+| chart, record, draws | global minimum | costs | converged | iterations, median (range) | s per fit | worst physical error |
+|---|---|---|---|---|---|---|
+| three-physical, 10 s, N = 20 | 20/20 (ref 1.47438) | 1.4744-1.481 | 20/20 | 190 (23-377) | 35.6 (5.6-66.9) | b2 −14.5 % |
+| three-learned, 10 s, N = 7 (cut by the deadline) | 6/7 (ref 1.475) | 1.475-1.805 | 1/7 | 1150 (856-1150; 6 at the limit) | 149 (112-191) | b1 +352 %, b2 −100 % |
+
 ``--shooting L`` adds our default LM with multiple shooting (identify.shooting). learned, 10 s, N = 4, seed 1,
 ``--shooting 250`` (stages 250/1000/4000, then single shooting): 0/4 against 1/4 single shooting (costs 1.35-13.2
 against 1.27-1.46; one final stage at the 1000 limit), median 23.7 s against 6.6 s: the learned chart's local
@@ -190,6 +200,7 @@ def main() -> None:
         ref.append(fit_ours(truth_chart(chart, truth), data, VARIANTS[name], args.seed)[2])
     if not args.no_trf:
         ref.append(fit_trf(truth_chart(chart, truth), data, args.seed)[2])
+    print(f"truth starts: {', '.join(f'{c:.6g}' for c in ref)}", flush=True)  # a run cut short keeps its reference
     for i in range(args.n):
         rough = rough_chart(chart, truth, np.random.default_rng([args.seed, i]))
         for name in runs:  # interleaved: every method on draw i before draw i + 1 (fair under shared load)
