@@ -28,6 +28,16 @@ shared 2-core machine). Measured (seed 1; more in docs/rough_init.md):
 | learned, 10 s, N = 10, ``--seed 2``, the same | — | 10/10, 8 of them at the 1000 limit (random curves: 0/10, all 10 at it) | — |
 | learned, 30 s, N = 4, the same | — | 4/4, all at the 1000 limit (random curves: 1/4, all at it) | — |
 
+Three-mass drive (``--chart three-physical``: three_mass_physical.yaml on three_mass_stribeck_wide_plant.yaml;
+``--chart three-learned``: three_mass_learned.yaml on three_mass_stribeck_plant.yaml), ``--variant identify
+--no-trf`` (one `identify()` call with every default: shooting auto, sub-steps auto, the curves' start), 10 s,
+seed 1 (the issue's ≥ 18/20):
+
+| chart, record, draws | global minimum | costs | converged | iterations, median (range) | s per fit | worst physical error |
+|---|---|---|---|---|---|---|
+| three-physical, 10 s, N = 20 | 20/20 (ref 1.47438) | 1.4744-1.481 | 20/20 | 190 (23-377) | 35.6 (5.6-66.9) | b2 −14.5 % |
+| three-learned, 10 s, N = 7 (cut by the deadline) | 6/7 (ref 1.475) | 1.475-1.805 | 1/7 | 1150 (856-1150; 6 at the limit) | 149 (112-191) | b1 +352 %, b2 −100 % |
+
 ``--shooting L`` adds our default LM with multiple shooting (identify.shooting). learned, 10 s, N = 4, seed 1,
 ``--shooting 250`` (stages 250/1000/4000, then single shooting): 0/4 against 1/4 single shooting (costs 1.35-13.2
 against 1.27-1.46; one final stage at the 1000 limit), median 23.7 s against 6.6 s: the learned chart's local
@@ -57,12 +67,14 @@ from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
 from flowchart2sdnn.identify.curvestart import curve_start  # noqa: E402
 from flowchart2sdnn.identify.problem import build_problem  # noqa: E402
-from flowchart2sdnn.identify.run import lm_options  # noqa: E402
+from flowchart2sdnn.identify.run import identify, lm_options  # noqa: E402
 from flowchart2sdnn.identify.settings import IdentifySettings  # noqa: E402
 from flowchart2sdnn.identify.workers import run_start  # noqa: E402
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
 
-CHARTS = {"learned": ("two_mass", "two_mass_plant"), "coulomb": ("two_mass_coulomb", "two_mass_coulomb_plant")}
+CHARTS = {"learned": ("two_mass", "two_mass_plant"), "coulomb": ("two_mass_coulomb", "two_mass_coulomb_plant"),
+          "three-learned": ("three_mass_learned", "three_mass_stribeck_plant"),
+          "three-physical": ("three_mass_physical", "three_mass_stribeck_wide_plant")}
 #: our LM with one change each; "default" is identify's default
 #: ("curve_start": "random" starts the learned curves from the chart's seeded weights, the default before
 #: identify.curvestart; every other key is an LMOptions field)
@@ -72,6 +84,7 @@ VARIANTS = {
     "noscale": {"scale": "none"},
     "jac-per-weight": {"scale": "jac", "scale_groups": ()},
     "tau0": {"tau": 0.0},
+    "identify": {},  # identify() itself, every default (substeps, shooting auto, curves' start): fit_identify
 }
 FACTOR = 3.0
 GLOBAL = 1.05
@@ -115,6 +128,19 @@ def fit_ours(chart, data, variant: dict, seed: int, shooting: int = 0):
     r = run_start(problem, x0, lo, hi, opts, shooting=shooting)
     iterations = brief + r.iterations + sum(s["iterations"] for s in r.stages[:-1])  # every stage's (shooting)
     return problem, r.x, r.cost, time.perf_counter() - t0, iterations, r.status
+
+
+def fit_identify(chart, data, seed: int):
+    """One default `identify` run (what a user gets: shooting auto, the curves' start, the stability check)."""
+    t0 = time.perf_counter()
+    out = identify(chart, data, settings=IdentifySettings(seed=seed))
+    secs = time.perf_counter() - t0
+    lm = out.lm
+    brief = (out.extra.get("curve_start") or {}).get("iterations", 0)
+    iterations = brief + lm.iterations + sum(s["iterations"] for s in lm.stages[:-1])
+    values = {n: e.value for n, e in out.parameters.items() if n in out.problem.names}
+    status = f"{lm.status}{'' if out.converged else ' (NOT conv.)'}"
+    return out.problem, np.array(list(values.values())), float(lm.cost), secs, iterations, status, values
 
 
 def fit_trf(chart, data, seed: int):
@@ -168,32 +194,45 @@ def main() -> None:
         runs["trf"] = []
     ref = []
     for name in variants:
+        if name == "identify":
+            ref.append(fit_identify(truth_chart(chart, truth), data, args.seed)[2])
+            continue
         ref.append(fit_ours(truth_chart(chart, truth), data, VARIANTS[name], args.seed)[2])
     if not args.no_trf:
         ref.append(fit_trf(truth_chart(chart, truth), data, args.seed)[2])
+    print(f"truth starts: {', '.join(f'{c:.6g}' for c in ref)}", flush=True)  # a run cut short keeps its reference
     for i in range(args.n):
         rough = rough_chart(chart, truth, np.random.default_rng([args.seed, i]))
         for name in runs:  # interleaved: every method on draw i before draw i + 1 (fair under shared load)
             if name == "trf":
                 out = fit_trf(rough, data, args.seed)
+            elif name == "identify":
+                out = fit_identify(rough, data, args.seed)
             elif name.startswith("shoot-"):
                 out = fit_ours(rough, data, VARIANTS["default"], args.seed, int(name[6:]))
             else:
                 out = fit_ours(rough, data, VARIANTS[name], args.seed)
-            problem, x, cost, secs, evals, status = out
-            values = dict(zip(problem.names, x, strict=True))
+            problem, x, cost, secs, evals, status = out[:6]
+            values = out[6] if len(out) > 6 else dict(zip(problem.names, x, strict=True))
             runs[name].append((cost, secs, evals, status, values))
             errs = " ".join(f"{k} {100 * (values[k] / truth[k] - 1):+.1f}%" for k in values if k in truth)
+            worst = max((abs(values[k] / truth[k] - 1) for k in values if k in truth), default=0.0)
+            runs[name][-1] += (worst,)
             print(f"draw {i} {name:10s} cost {cost:10.4g} {secs:6.1f} s {evals:4d} it/ev {status:18s} {errs}",
                   flush=True)
     best = min([*ref] + [r[0] for rs in runs.values() for r in rs])
     print(f"\nreference cost {best:.6g} (truth starts: {', '.join(f'{c:.6g}' for c in ref)})\n")
-    print("| optimizer | global minimum (cost <= 1.05x ref) | median s per fit | median iterations/evaluations |")
-    print("|---|---|---|---|")
+    print("| optimizer | global minimum (cost <= 1.05x ref) | costs | median s per fit | median iterations/evaluations "
+          "(range) | converged | median (max) worst physical error |")
+    print("|---|---|---|---|---|---|---|")
     for name, rs in runs.items():
         hit = sum(r[0] <= GLOBAL * best for r in rs)
-        print(f"| {name} | {hit}/{len(rs)} | {np.median([r[1] for r in rs]):.1f} | "
-              f"{np.median([r[2] for r in rs]):.0f} |")
+        conv = sum("NOT" not in r[3] and r[3] != "max_iter" for r in rs)
+        its = [r[2] for r in rs]
+        worst = [100 * r[5] for r in rs]
+        print(f"| {name} | {hit}/{len(rs)} | {min(r[0] for r in rs):.4g}-{max(r[0] for r in rs):.4g} | "
+              f"{np.median([r[1] for r in rs]):.1f} | {np.median(its):.0f} ({min(its)}-{max(its)}) | "
+              f"{conv}/{len(rs)} | {np.median(worst):.1f} % ({max(worst):.1f} %) |")
 
 
 if __name__ == "__main__":
