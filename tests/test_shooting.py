@@ -190,6 +190,14 @@ def test_cli(tmp_path):
     assert r.exit_code == 0, r.output
     doc = json.loads(out.read_text())
     assert doc["shooting"]["length"] == 100 and doc["shooting"]["stages"][-1]["length"] == 399
+    # --threads: the segments on two threads, the same result
+    out2 = tmp_path / "r2.json"
+    r = runner.invoke(main, ["identify", str(csv), "--diagram", str(COULOMB), "--shooting", "100", "--threads", "2",
+                             "-o", str(out2), "--quiet"])
+    assert r.exit_code == 0, r.output
+    assert json.loads(out2.read_text())["parameters"] == doc["parameters"]
+    r = runner.invoke(main, ["identify", str(csv), "--diagram", str(COULOMB), "--threads", "0"])
+    assert r.exit_code == 2 and "--threads" in r.output
 
 
 def test_batch_takes_shooting_and_finds_what_identify_finds(tmp_path):

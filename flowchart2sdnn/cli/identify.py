@@ -48,6 +48,9 @@ __all__ = ["identify"]
 @click.option("--shooting-starts", type=click.Choice(["data", "free"]), default="data", show_default=True,
               help="Multiple shooting: measured states start each segment from the data's sample ('data') or are "
                    "fitted like the unmeasured ones from it ('free': a noisy sample is a poor start).")
+@click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True,
+              help="Multiple shooting: run the segments of a fit on N threads in this process (same result as 1; "
+                   "pays from segments of ~500 samples on, benchmarks/bench_shooting_iteration.py).")
 @click.option("--floor-bias/--no-floor-bias", default=True, show_default=True,
               help="Estimate the discretization's bias beta on each parameter (the network refitted to the "
                    "continuous oracle's noise-free run of the identified chart), widen each 95 % interval by "
@@ -83,7 +86,7 @@ __all__ = ["identify"]
 @click.option("--quiet", is_flag=True, help="No progress and no table.")
 @executor_options("the multi-start fits")
 @handle_errors
-def identify(data, chart, output, fix_from, validation, init_window, shooting, shooting_starts, floor_bias, curve_start, split, starts, seed, online, window, average,
+def identify(data, chart, output, fix_from, validation, init_window, shooting, shooting_starts, threads, floor_bias, curve_start, split, starts, seed, online, window, average,
              max_iter, alignment, substeps, mapping, units, plots, html_path, force, quiet, workers=None,
              scheduler=None) -> None:
     """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
@@ -125,7 +128,7 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
                                     online=online, window=window, average=average, fixed_from=tuple(fixed),
                                     init_window=init_window or 0, shooting=shooting,
                                     shooting_starts=shooting_starts, floor_bias=floor_bias,
-                                    curve_start=curve_start)
+                                    curve_start=curve_start, threads=threads)
     progress = Progress(quiet)
     ctrl_c = CtrlC()  # until the files are written: restored when the click context closes
     click.get_current_context().call_on_close(ctrl_c.restore)
