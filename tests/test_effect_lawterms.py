@@ -74,15 +74,19 @@ def _scales():
     return Scales(lo={"x1dev": 0.0}, hi={"x1dev": 4.0})
 
 
-def test_diagnose_finds_the_laminar_share_of_the_lower_outflow():
-    plant = chart("tanks_laminar_plant")
+def _first_round(plant_name: str) -> tuple[dict, dict]:
+    """diagnose's first round (one round) on the tanks chart against `plant_name`'s records, and the final values."""
+    plant = chart(plant_name)
     settings = {"amplitude": (0.0, 2.0), "hold": (20.0, 80.0), "relay_level": 0.0}
     train, val = record(plant, 1200.0, 1, 0.01, **settings), record(plant, 600.0, 2, 0.01, **settings)
     r = diagnose(chart("tanks"), train, [val], DiagnoseSettings(rounds=1)).report
-    first = r["rounds"][0]
+    return r["rounds"][0], {k: v["value"] for k, v in r["final"]["parameters"].items()}
+
+
+def test_diagnose_finds_the_laminar_share_of_the_lower_outflow():
+    first, p = _first_round("tanks_laminar_plant")
     assert first["accepted"] and (first["effect"], first["at"]) == ("linear_term", "r2"), first
     assert first["validation_rms_after"] < first["validation_rms_before"] / 10
-    p = {k: v["value"] for k, v in r["final"]["parameters"].items()}
     # measured: r2_lin 0.094, k1 -3.3 %, k3 -5.0 %, k4 -5.4 % (the y start is the first noisy sample), RMS 0.405
     # -> 0.018 (noise 0.01)
     assert p["r2_lin"] == pytest.approx(0.1, rel=0.1)
@@ -93,14 +97,9 @@ def test_diagnose_finds_the_laminar_share_of_the_lower_outflow():
 def test_diagnose_finds_the_pump_zero():
     """Bench: the pump delivers k4 (u - 0.3); the chart's pump k4 u. Measured: u_zero -0.3000, k1 -2.5 %, k3 and
     k4 +1.1 %, validation RMS 0.640 -> 0.025 (noise 0.01)."""
-    plant = chart("tanks_pump_zero_plant")
-    settings = {"amplitude": (0.0, 2.0), "hold": (20.0, 80.0), "relay_level": 0.0}
-    train, val = record(plant, 1200.0, 1, 0.01, **settings), record(plant, 600.0, 2, 0.01, **settings)
-    r = diagnose(chart("tanks"), train, [val], DiagnoseSettings(rounds=1)).report
-    first = r["rounds"][0]
+    first, p = _first_round("tanks_pump_zero_plant")
     assert first["accepted"] and (first["effect"], first["at"]) == ("input_offset", "u"), first
     assert first["validation_rms_after"] < first["validation_rms_before"] / 10
-    p = {k: v["value"] for k, v in r["final"]["parameters"].items()}
     assert p["u_zero"] == pytest.approx(-0.3, rel=0.05)
     for name, truth in (("k1", 0.5), ("k3", 0.4), ("k4", 1.0)):
         assert p[name] == pytest.approx(truth, rel=0.05)

@@ -10,11 +10,11 @@ free over the whole record from rest, without the fitted window). Skipped when t
 from __future__ import annotations
 
 import csv
-import importlib.util
 from pathlib import Path
 
 import numpy as np
 import pytest
+from example_module import load_example
 
 import flowchart2sdnn as sd
 from flowchart2sdnn.simulate.continuous import simulate_continuous
@@ -30,10 +30,7 @@ pytestmark = [
 
 
 def _example():
-    spec = importlib.util.spec_from_file_location("ced_example", ROOT / "examples" / "ced.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_example("ced")
 
 
 def _raw(name: str) -> tuple[np.ndarray, np.ndarray]:

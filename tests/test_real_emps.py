@@ -11,12 +11,12 @@ simulation of the chart. Skipped when the data are absent.
 from __future__ import annotations
 
 import csv
-import importlib.util
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
 import pytest
+from example_module import load_example
 
 import flowchart2sdnn as sd
 from flowchart2sdnn.simulate.continuous import simulate_continuous
@@ -31,10 +31,7 @@ pytestmark = [
 
 
 def _example():
-    spec = importlib.util.spec_from_file_location("emps_example", ROOT / "examples" / "emps.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
+    return load_example("emps")
 
 
 def _raw(name: str) -> tuple[np.ndarray, np.ndarray]:
