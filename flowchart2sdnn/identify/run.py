@@ -273,7 +273,8 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
     groups = tuple(i if n in params else -1 for i, n in enumerate(problem.names))
     return LMOptions(max_iter=settings.max_iter, min_rel_cost_change=MIN_REL_COST_CHANGE, tau=settings.lm_tau,
                      stall_decrease=settings.converged_decrease / max(1, problem.n_residuals),
-                     scale=settings.lm_scale, scale_groups=groups if settings.lm_scale == "jac" else ())
+                     scale=settings.lm_scale, scale_groups=groups if settings.lm_scale == "jac" else (),
+                     geodesic=settings.lm_geodesic)
 
 
 def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, progress, stop, executor) -> _Outcome:

@@ -30,6 +30,11 @@ ONLINE_TAU = 1.0
 #: inertia of ~0.4 kg·m² share one damping and rough starts crawl (benchmarks/bench_rough_init.py, 10 s bench:
 #: 167-668 iterations and 2 of 3 rough starts at the minimum with mu I, 22-27 iterations and 3 of 3 with D²).
 IDENTIFY_SCALE = "jac"
+#: ... and bends each step along the cost's valley (geodesic acceleration, fit.lm.LMOptions.geodesic: one extra
+#: simulation per step, refused when the bend exceeds this fraction of the step, Transtrum & Sethna's 0.75).
+#: A learned friction curve's weights and the damping d lie along a narrow curved valley where plain steps are cut
+#: back to a crawl (benchmarks/bench_rough_init.py, learned chart, docs/rough_init.md).
+IDENTIFY_GEODESIC = 0.75
 #: An LM iteration that gains less than this fraction of the cost ends the fit: further ones only polish noise.
 MIN_REL_COST_CHANGE = 1e-10
 #: A fit has converged when its last 10 iterations together lowered the cost E by less than this many times
@@ -87,6 +92,7 @@ class IdentifySettings:
     lm_tau : float           first LM damping factor (see :data:`IDENTIFY_TAU`); 0 gives trainlm's fixed 1e-3
     lm_scale : str           "jac": damping scaled per quantity by the Jacobian's column norms (see
                              :data:`IDENTIFY_SCALE`); "none": trainlm's mu I
+    lm_geodesic : float      geodesic acceleration's largest bend (see :data:`IDENTIFY_GEODESIC`); 0: plain steps
     converged_decrease : float  converged when 10 iterations together gain less than this many times E/N
                              (see :data:`CONVERGED_DECREASE`); 0 runs to ``max_iter``
     init_window : int        > 0: the validation record's initial state is fitted on its first init_window
@@ -121,6 +127,7 @@ class IdentifySettings:
     ranges: dict = field(default_factory=dict)
     lm_tau: float = IDENTIFY_TAU
     lm_scale: str = IDENTIFY_SCALE
+    lm_geodesic: float = IDENTIFY_GEODESIC
     converged_decrease: float = CONVERGED_DECREASE
     init_window: int = 0
     shooting: str | int = SHOOTING
@@ -156,4 +163,5 @@ class IdentifySettings:
         _need(self.curve_start in ("stick", "random"),
               f"curve_start must be 'stick' or 'random', got {self.curve_start!r}")
         _need(self.lm_scale in ("jac", "none"), f"lm_scale must be 'jac' or 'none', got {self.lm_scale!r}")
+        _need(0 <= self.lm_geodesic < 2, f"lm_geodesic must be in [0, 2), got {self.lm_geodesic}")
         _need(self.lm_tau >= 0 and math.isfinite(self.lm_tau), f"lm_tau must be a finite number >= 0, got {self.lm_tau}")
