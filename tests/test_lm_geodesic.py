@@ -1,0 +1,83 @@
+"""Geodesic acceleration (Transtrum & Sethna 2012): the second-order correction against a hand computation on a
+residual that is exactly quadratic, and fits that still end at the known minima (Rosenbrock, NIST Misra1a)."""
+
+import nist_misra1a as misra
+import numpy as np
+import pytest
+
+from flowchart2sdnn.fit import lm as lm_module
+from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
+from flowchart2sdnn.fit.transforms import Bounds
+
+
+def rosenbrock(p):
+    e = np.array([10 * (p[1] - p[0] ** 2), 1 - p[0]])
+    return e, -np.array([[-20 * p[0], 10.0], [-1.0, 0.0]])  # J = d yhat / dx = -de/dx
+
+
+def test_the_acceleration_is_the_damped_solve_of_the_exact_second_derivative():
+    """e(u) = y - (B u + 1/2 [uᵀC_k u]_k) is quadratic, so the finite difference along du is exact:
+    e_vv[k] = -duᵀ C_k du, and a = (JᵀJ + mu I)⁻¹ Jᵀ e_vv with J = B + [C_k u]_k."""
+    rng = np.random.default_rng(3)
+    B = rng.normal(size=(6, 2))
+    C = rng.normal(size=(6, 2, 2))
+    C = C + C.transpose(0, 2, 1)
+    y = rng.normal(size=6)
+    u = np.array([0.3, -0.2])
+
+    def residual(x):
+        return y - (B @ x + 0.5 * np.einsum("i,kij,j->k", x, C, x))
+
+    J = B + np.einsum("kij,j->ki", C, u)
+    e = residual(u)
+    mu = 0.5
+    A = J.T @ J
+    du = np.linalg.solve(A + mu * np.eye(2), J.T @ e)
+    bounds = Bounds.make(["a", "b"], None, None)
+    point = lm_module._Point(u, u, e, J, 0.5 * float(e @ e))
+    out = lm_module._accelerated(residual, bounds, point, J, J, A, None, du, mu, 1.99, lm_module._Counters())
+    e_vv = -np.einsum("i,kij,j->k", du, C, du)
+    a = np.linalg.solve(A + mu * np.eye(2), J.T @ e_vv)
+    np.testing.assert_allclose(out, du + 0.5 * a, rtol=1e-7)
+
+
+def test_a_step_that_bends_more_than_alpha_is_refused():
+    rng = np.random.default_rng(4)
+    J = rng.normal(size=(5, 2))
+    u = np.zeros(2)
+
+    def residual(x):  # strongly curved along every direction
+        return -(J @ x) - 50.0 * float(x @ x) * np.ones(5)
+
+    e = residual(u) + 1.0
+    A = J.T @ J
+    du = np.linalg.solve(A, J.T @ e)
+    point = lm_module._Point(u, u, e, J, 0.5 * float(e @ e))
+    bounds = Bounds.make(["a", "b"], None, None)
+    assert lm_module._accelerated(lambda x: residual(x) + 1.0, bounds, point, J, J, A, None, du, 0.0, 0.75,
+                                  lm_module._Counters()) is None
+
+
+@pytest.mark.parametrize("scale", ["none", "jac"])
+def test_rosenbrock_still_ends_at_its_minimum_in_fewer_iterations(scale):
+    plain = levenberg_marquardt(rosenbrock, [-1.2, 1.0], ["x1", "x2"], options=LMOptions(scale=scale))
+    bent = levenberg_marquardt(rosenbrock, [-1.2, 1.0], ["x1", "x2"], options=LMOptions(scale=scale, geodesic=0.75),
+                               residual=lambda p: rosenbrock(p)[0])
+    assert bent.converged, bent.message
+    np.testing.assert_allclose(bent.x, [1.0, 1.0], atol=1e-8)
+    assert bent.iterations < plain.iterations
+
+
+def test_nist_misra1a_with_acceleration():
+    res = levenberg_marquardt(misra.fun, misra.START_1, ["b1", "b2"], options=LMOptions(geodesic=0.75),
+                              residual=misra.residual)
+    assert res.converged, res.message
+    np.testing.assert_allclose(res.x, misra.CERTIFIED, rtol=1e-6)
+    np.testing.assert_allclose(2 * res.cost, misra.RESIDUAL_SUM_OF_SQUARES, rtol=1e-8)
+
+
+def test_the_option_is_checked():
+    with pytest.raises(ValueError, match="geodesic"):
+        LMOptions(geodesic=-0.1)
+    with pytest.raises(ValueError, match="geodesic"):
+        LMOptions(geodesic=float("nan"))
