@@ -13,10 +13,14 @@ import numpy as np
 import pytest
 from diagnose_bench import aprbs_input, chart, record, simulate
 
+from flowchart2sdnn.data.csvdata import Dataset
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS, Scales, SensorLimit, SensorOffset
 from flowchart2sdnn.diagnose.graph import Place
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
+from flowchart2sdnn.diagram.dump import dump_diagram
 from flowchart2sdnn.diagram.validate import diagram_from_text
+from flowchart2sdnn.simulate.continuous import simulate_continuous
+from flowchart2sdnn.simulate.run import simulate_chart
 
 TWO = chart("two_mass_nominal")
 
@@ -39,23 +43,53 @@ def test_the_patched_output_is_the_charts_output_clipped_and_the_dynamics_are_un
     assert patched.block("w2_true").kind == "integrator"
 
 
-def test_limits_are_scanned_from_the_outputs_range_and_outputs_started_from_data_are_not_offered():
-    opts = SensorLimit(fractions=(0.5, 0.9)).options(TWO, Place("w2", "output"), Scales({}, {"w2": -4.0}, {"w2": 8.0}))
-    assert opts == (4.0, 7.2)
-    text = """
+ONE_FROM_DATA = """
 sdnn: 1
 name: from_data
 sample_time: 0.001
 inputs: {F: {}}
 outputs: {v: {}, x: {}}
-parameters: {m: {init: 2}}
+parameters: {m: {init: 0.2}, b: {init: 0.5}}
 blocks:
-  acc: {type: gain, in: F, k: 1/m}
+  Fsum: {type: sum, in: [F, -Fv]}
+  acc: {type: gain, in: Fsum, k: 1/m}
   v:   {type: integrator, in: acc, init: data}
+  Fv:  {type: gain, in: v, k: b}
   x:   {type: integrator, in: v}
 """
-    d = diagram_from_text(text, "from_data.yaml")
-    assert [p.at for p in SensorLimit().places(d)] == ["x"]
+
+
+def test_limits_are_scanned_from_the_outputs_range_and_outputs_started_from_data_are_offered():
+    opts = SensorLimit(fractions=(0.5, 0.9)).options(TWO, Place("w2", "output"), Scales({}, {"w2": -4.0}, {"w2": 8.0}))
+    assert opts == (4.0, 7.2)
+    d = diagram_from_text(ONE_FROM_DATA, "from_data.yaml")
+    assert [p.at for p in SensorLimit().places(d)] == ["v", "x"]
+
+
+def _columns(u, v):
+    return Dataset("rec", {"F": u[:, 0], "v": v, "x": np.zeros(len(v))}, None, len(v), 0.001, 0.0, "rec",
+                   {"F": "F", "v": "v", "x": "x"})
+
+
+@pytest.mark.parametrize("first", [0.3, 0.95])  # inside the clip, and beyond it (the sensor reads 0.8 there)
+def test_a_clipped_output_started_from_data_starts_its_true_state_at_the_measured_sample(first):
+    d = diagram_from_text(ONE_FROM_DATA, "from_data.yaml")
+    patched = _set(SensorLimit().patch(d, Place("v", "output"), 1.0), v_lim=0.5, v_off=0.3)  # clip [-0.2, 0.8]
+    assert patched.block("v_true").init == "data" and patched.block("v_true").measured_by == "v"
+    u = aprbs_input(3000, seed=7, amplitude=2.5)
+    measured = min(first, 0.8)  # what the sensor reads at the start: the clip when the level is beyond it
+    # oracle: the continuous chart (RK4) from v(0) = the measured sample, its speed clipped by numpy
+    plain = simulate_continuous(d, u, init={"v": measured})
+    assert plain[:, 0].min() < -0.4 and plain[:, 0].max() > 1.0  # the clip acts both ways
+    for continuous in (False, True):
+        got = simulate_chart(patched, _columns(u, np.full(3000, measured)), continuous=continuous)
+        # the network: explicit Euler at T = 1 ms (within 2e-3 here); its row 0 of a sum output is that neuron's history (0), a
+        # row no fit or score reads (zoh: the network's rows are 1..Q-1)
+        rows, tol = (slice(0, None), 1e-9) if continuous else (slice(1, None), 5e-3)
+        np.testing.assert_allclose(got["v"][rows], np.clip(plain[rows, 0], -0.2, 0.8), rtol=0, atol=tol)
+        np.testing.assert_allclose(got["x"][rows], plain[rows, 1], rtol=0, atol=tol)
+    dumped = diagram_from_text(dump_diagram(patched), "again.yaml")  # the chart file keeps the start
+    assert dumped.block("v_true").measured_by == "v" and dumped.block("v_true").data_column == "v"
 
 
 def test_a_clipped_speed_sensor_is_found_at_its_output_with_its_limits():
