@@ -13,12 +13,16 @@ import numpy as np
 import pytest
 from diagnose_bench import aprbs_input, chart, record, simulate
 
+from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.data.csvdata import Dataset
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS, Scales, SensorLimit, SensorOffset
 from flowchart2sdnn.diagnose.graph import Place
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
 from flowchart2sdnn.diagram.dump import dump_diagram
 from flowchart2sdnn.diagram.validate import diagram_from_text
+from flowchart2sdnn.identify.initstate import estimate_initial_state
+from flowchart2sdnn.identify.problem import data_init
+from flowchart2sdnn.network.runtime import CompiledNetwork
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 from flowchart2sdnn.simulate.run import simulate_chart
 
@@ -148,6 +152,30 @@ def test_a_clipped_sensor_on_an_output_started_from_the_data_is_found_with_its_l
     assert p["m"]["value"] == pytest.approx(2.0, rel=0.05) and p["b"]["value"] == pytest.approx(0.5, rel=0.05)
     rnd = report["rounds"][0]
     assert rnd["validation_rms_after"] <= 1.2 * noise or rnd["validation_rms_after"] < rnd["validation_rms_before"] / 3
+
+
+def test_a_start_beyond_the_clip_is_read_at_the_clip_and_recovered_by_a_window_that_sees_the_reading_leave_it():
+    """The plant starts at 1.2 m/s, above the sensor's 0.85: the first sample reads the clip. `init: data` starts
+    the true state there (all the reading tells); the initial-state window fit (`--init-window`) moves it to the
+    truth once its window holds the rows where the reading leaves the clip, not before (the start is not seen)."""
+    plant = _moving_plant()
+    plant = dataclasses.replace(plant, blocks=tuple(dataclasses.replace(b, init=1.2) if b.name == "v" else b
+                                                    for b in plant.blocks))
+    excitation = {"amplitude": (-6.0, 6.0), "relay_level": 3.0, "relay_switch": 1.0, "relay_band": 0.2}
+    rec = record(plant, 3.0, 101, 0.01, **excitation)
+    rec.columns["v"] = np.clip(rec.columns["v"], -0.6, 0.85)
+    leaves = int(np.argmax(rec.columns["v"] < 0.85 - 0.05))
+    assert rec.columns["v"][0] == 0.85 and leaves > 100
+    from_data = dataclasses.replace(plant, blocks=tuple(dataclasses.replace(b, init="data") if b.name == "v" else b
+                                                        for b in plant.blocks))
+    chart_ = _set(SensorLimit().patch(from_data, Place("v", "output"), 0.725), v_lim=0.725, v_off=0.125)
+    net = compile_diagram(chart_).network
+    compiled = CompiledNetwork(net)
+    assert data_init(net, rec) == {"v": 0.85}  # the hidden state's start: the measured (clipped) sample
+    short = estimate_initial_state(compiled, compiled.theta0(), rec, "zoh", 5, data_init(net, rec))
+    assert short.values["v_true"] == pytest.approx(0.85, abs=0.02)
+    seen = estimate_initial_state(compiled, compiled.theta0(), rec, "zoh", leaves + 100, data_init(net, rec))
+    assert seen.values["v_true"] == pytest.approx(1.2, abs=0.01)
 
 
 # the start is fitted (`init: estimate`): with `init: data` the first noisy sample (0.03 off here) decays with
