@@ -1,8 +1,9 @@
 """The sensor effects (issue 16): a measured output clipped at learned limits, and a sensor's zero offset.
 
-Oracles: the chart's own outputs clipped by hand (numpy), the chart driven by a hand-shifted input, and
-virtual test benches whose measured speed is clipped or offset by hand after the continuous simulation; the
-truths are the plant's parameters, the clip and the offset.
+Oracles: the chart's own outputs clipped by hand (numpy), the continuous chart (RK4) started at the measured
+sample and clipped by hand (an output started from the data, `init: data`), the chart driven by a hand-shifted
+input, and virtual test benches whose measured speed is clipped or offset by hand after the continuous
+simulation; the truths are the plant's parameters and start, the clip and the offset.
 """
 
 from __future__ import annotations
