@@ -6,6 +6,8 @@ an offset or a linear coefficient at 0) or, for the input dead time, by reading 
 identified on estimation.csv from the chart's `init` (4 starts) and scored by the benchmark's protocol: test RMSE
 on validation.csv from sample 5, both levels' start fitted on its first 5 samples (`--init-window 5`).
 Two tables: the changes added one by one to the plain chart, and each change removed alone from the full chart.
+The first also holds the plain chart with diagnose's `sensor_limit` patch at y_V (its lower level keeps its start
+from the data, `measured_by`; limits from the sensor's 0..10 V range): the 10 V clip on its own.
 
 Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/cascaded_tanks_ablation.py`` (about 3 min).
 """
@@ -19,6 +21,8 @@ from dataclasses import replace
 from pathlib import Path
 
 from flowchart2sdnn.api import identify, load_chart, read_csv
+from flowchart2sdnn.diagnose.effects import SensorLimit
+from flowchart2sdnn.diagnose.graph import Place
 from flowchart2sdnn.expr import parse_expr
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -51,6 +55,13 @@ def without(chart, changes, start=None):
     return replace(chart, parameters=params, blocks=blocks, source_sha256=None)
 
 
+def sensor_limited(chart):
+    """`chart` with diagnose's sensor_limit at y_V, clip o -/+ L from the sensor's range 0..10 V (o = L = 5)."""
+    patched = SensorLimit().patch(chart, Place("y_V", "output"), 5.0)
+    params = tuple(replace(p, init=5.0) if p.name == "y_V_off" else p for p in patched.parameters)
+    return replace(patched, parameters=params)
+
+
 def score(chart, train, test) -> tuple[float, float, float, dict]:
     """Estimation and test RMSE, seconds, and the fitted parameters."""
     t0 = time.perf_counter()
@@ -67,8 +78,11 @@ def main() -> None:
     full = load_chart(ROOT / "diagrams" / "real" / "cascaded_tanks_physical.yaml")
     names = list(CHANGES)
     print("| chart | estimation RMSE (V) | test RMSE (V) | fit (s) |\n|---|---|---|---|")
-    tr, te, s, _ = score(load_chart(ROOT / "diagrams" / "real" / "cascaded_tanks.yaml"), train, test)
+    plain = load_chart(ROOT / "diagrams" / "real" / "cascaded_tanks.yaml")
+    tr, te, s, _ = score(plain, train, test)
     print(f"| plain Torricelli (diagrams/real/cascaded_tanks.yaml) | {tr:.3f} | {te:.3f} | {s:.0f} |")
+    tr, te, s, _ = score(sensor_limited(plain), train, test)
+    print(f"| plain + diagnose's sensor_limit at y_V (start from the data) | {tr:.3f} | {te:.3f} | {s:.0f} |")
     # each row starts from the previous row's fit (the new change's parameters from the chart's init), as
     # diagnose refits from the current fit: from the chart's init alone some rows stop in a worse minimum
     warm: dict = {}

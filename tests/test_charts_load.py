@@ -45,6 +45,8 @@ BAD_CHARTS = {
     "init_data_not_output": ("CHART011", "phi", "init: data"),
     "init_outside_bounds": ("LINT006", None, "J1: {init: 2.0"),
     "k_call": ("CHART007", "acc1", "__import__"),
+    "measured_by_not_output": ("CHART011", "w1true", "measured_by: w2"),
+    "measured_by_without_data": ("CHART011", "w1true", "measured_by: w1"),
     "merge_key": ("YAML007", None, "<<: *defaults"),
     "min_ge_max": ("LINT006", None, "J1: {init"),
     "missing_field": ("CHART002", "acc1", "acc1: {type: gain"),

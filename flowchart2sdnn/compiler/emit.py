@@ -78,8 +78,8 @@ def emit_network(diagram: Diagram, chart: DiscreteChart, loops: LoopReport, seed
                     weights.append(WeightSpec("b", source=-1, col=0, delay=0, **common))
         if nb.init is not None:
             for k, value in enumerate(nb.init):
-                if value == "data":
-                    initial.append(InitialState(m, k, 0.0, nb.name))
+                if value == "data":  # the first sample of the output that measures it (its own, or measured_by)
+                    initial.append(InitialState(m, k, 0.0, diagram.block(nb.name).data_column or nb.name))
                 elif isinstance(value, str):  # a parameter's name: the start is that parameter
                     initial.append(InitialState(m, k, float(diagram.parameter(value).init), parameter=value))
                 elif value:

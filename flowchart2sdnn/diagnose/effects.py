@@ -25,7 +25,8 @@ damping        speed, speed diff.  viscous gain with a new parameter (0) in the 
 dead_time      input               a delay of n samples in front of every consumer of the input
 saturation     input               L*sat((u - o)/L) + o: a hard clip at o -/+ L, L scanned in the data range
 sensor_limit   output              the same clip on a measured output (a sensor or its converter at its range);
-                                   the chart's block is renamed, the output reads the clipped signal
+                                   the chart's block is renamed, the output reads the clipped signal (an
+                                   `init: data` block keeps its start: `measured_by` the output)
 sensor_offset  output (read)       the physics reads the measured output + o (o = 0): a sensor's zero offset
 backlash       spring angle        c*x becomes c*x + an odd learned curve (v = 0) of x (a dead zone is learnable)
 dead_zone      spring angle        c*x becomes c*(x - g*sat(x/g)): exact backlash of half gap g (scanned)
@@ -412,8 +413,10 @@ class SensorLimit:
     that read it reads the new name; the output's name is taken by the clip, so data columns stay mapped.
 
     L is scanned as fractions of the largest |value| of the current fit's simulation of the output (a clip
-    beyond it changes nothing), o starts at 0; the refit moves both. Outputs started from the data
-    (`init: data`) are not offered: the renamed block would no longer be a measured signal.
+    beyond it changes nothing), o starts at 0; the refit moves both. An output started from the data
+    (`init: data`) keeps that start: the hidden true state is `measured_by` the output, so it starts at the
+    output's first measured sample (at the clip when the sensor read its limit there: the nearest start the
+    reading allows, a bound of the true one; `--init-window` can move it only if the window leaves the clip).
     """
 
     fractions: tuple[float, ...] = (0.95, 0.9, 0.85, 0.8, 0.75, 0.7, 0.6, 0.5, 0.4)

@@ -147,9 +147,8 @@ def input_places(diagram: Diagram) -> tuple[Place, ...]:
 
 
 def output_places(diagram: Diagram) -> tuple[Place, ...]:
-    """The measured outputs whose block a patch may rename: not those started from the data (`init: data`
-    belongs to the measured signal, which the renamed block would no longer be)."""
-    return tuple(Place(s.name, "output") for s in diagram.outputs if diagram.block(s.name).init != "data")
+    """The measured outputs (a block started from the data keeps its start when renamed: see rename_block)."""
+    return tuple(Place(s.name, "output") for s in diagram.outputs)
 
 
 # ---------------------------------------------------------------------------------------------- rewiring
@@ -213,6 +212,9 @@ def reroute(diagram: Diagram, signal: str, new: str, keep: set[str] | frozenset[
 
 
 def rename_block(diagram: Diagram, old: str, new: str) -> Diagram:
-    """The chart with block `old` named `new` and every block that read `old` reading `new`."""
-    renamed = tuple(replace(b, name=new) if b.name == old else b for b in diagram.blocks)
+    """The chart with block `old` named `new` and every block that read `old` reading `new`.
+
+    An integrator started from the data (`init: data`) keeps its data column: renamed, it is `measured_by` the
+    output it was, so the caller must leave a block of that name among the outputs (a sensor in between)."""
+    renamed = tuple(replace(b, name=new, measured_by=b.data_column) if b.name == old else b for b in diagram.blocks)
     return reroute(replace(diagram, blocks=renamed, source_sha256=None), old, new)

@@ -28,6 +28,8 @@ def _block_dict(b: Block) -> dict:
         d["k"] = _yaml_number(b.k.evaluate({})) if b.k.is_constant else str(b.k)
     if b.kind == "integrator" and b.init not in (None, 0.0):
         d["init"] = b.init if isinstance(b.init, str) else _yaml_number(b.init)
+    if b.kind == "integrator" and b.measured_by is not None:
+        d["measured_by"] = b.measured_by
     if b.kind == "delay" and b.n not in (None, 1):
         d["n"] = b.n
     if b.kind == "function":

@@ -107,6 +107,9 @@ class Block:
     # integrator: initial value (a number, "data": the first measured sample of this output, or a parameter's
     # name: the start is that parameter, fitted like any other; `init: estimate` adds one, diagram.initestimate)
     init: float | str | None = None
+    # integrator with `init: data` that is not itself an output: the measured output whose first sample starts
+    # it (a sensor in between, e.g. a clip: the true state starts where the sensor read it; issue 16)
+    measured_by: str | None = None
     # delay: samples of pure delay
     n: int | None = None
     # nonlinear
@@ -118,6 +121,13 @@ class Block:
     # function
     f: str | None = None
     eps: float | None = None
+
+    @property
+    def data_column(self) -> str | None:
+        """The measured output whose first sample starts this integrator (`init: data`), else None."""
+        if self.kind != "integrator" or self.init != "data":
+            return None
+        return self.measured_by or self.name
 
     @property
     def signals_in(self) -> tuple[str, ...]:

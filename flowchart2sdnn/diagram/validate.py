@@ -47,7 +47,7 @@ COMMON_BLOCK_KEYS = ("type", "unit", "description")
 BLOCK_KEYS: dict[str, tuple[str, ...]] = {
     "sum": ("in",),
     "gain": ("in", "k"),
-    "integrator": ("in", "init"),
+    "integrator": ("in", "init", "measured_by"),
     "delay": ("in", "n"),
     "constant": ("k",),
     "nonlinear": ("in", "neurons", "bias", "init_range", "fixed", "weights"),
@@ -376,6 +376,8 @@ class _Validator:
                 self.error("CHART004", "'init' must be a number, 'data', 'estimate' or a parameter's name, found "
                            f"{_show(init)}", path + ("init",), name,
                            did_you_mean(str(init), ["data", ESTIMATE, *pnames]) if isinstance(init, str) else None)
+            if "measured_by" in spec:
+                fields["measured_by"] = self.optional_str(spec, "measured_by", path, name)
         elif kind == "delay":
             n = spec.get("n", 1)
             if not isinstance(n, int) or isinstance(n, bool) or not 1 <= n <= MAX_DELAY:
@@ -524,10 +526,31 @@ class _Validator:
                            hint=did_you_mean(s.name, block_names))
         if not outputs and "outputs" in (self.doc.data or {}):
             self.error("CHART002", "a chart needs at least one output", ("outputs",))
+        out_names = [s.name for s in outputs]
         for b in blocks:
-            if b.kind == "integrator" and b.init == "data" and b.name not in {s.name for s in outputs}:
+            if b.kind != "integrator":
+                continue
+            if b.measured_by is not None:
+                self._measured_by(b, out_names)
+            elif b.init == "data" and b.name not in out_names:
                 self.error("CHART011", "'init: data' needs the integrator to be a measured output",
-                           ("blocks", b.name, "init"), b.name, "give a number or list the block under 'outputs'")
+                           ("blocks", b.name, "init"), b.name,
+                           "give a number, list the block under 'outputs', or name the output that measures it "
+                           "with 'measured_by'")
+
+    def _measured_by(self, b: Block, out_names: list[str]) -> None:
+        """`measured_by: y` starts a hidden integrator from output y's first sample: only with `init: data`,
+        on an integrator that is not an output itself, naming an output of the chart."""
+        where = ("blocks", b.name, "measured_by")
+        if b.init != "data":
+            self.error("CHART011", "'measured_by' goes with 'init: data' (the start read from that output's first "
+                       f"sample), found init {_show(b.init)}", where, b.name, "set 'init: data' or drop 'measured_by'")
+        elif b.name in out_names:
+            self.error("CHART011", f"'measured_by' names the output that measures a hidden integrator; '{b.name}' is "
+                       "an output itself", where, b.name, "drop 'measured_by'")
+        elif b.measured_by not in out_names:
+            self.error("CHART011", f"'measured_by' must name an output of the chart, found {_show(b.measured_by)}",
+                       where, b.name, did_you_mean(str(b.measured_by), out_names))
 
 
 def _kind(value) -> str:

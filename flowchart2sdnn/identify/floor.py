@@ -42,9 +42,8 @@ def oracle_steps(substeps: int) -> int:
 
 
 def _oracle_init(chart: Diagram, data: Dataset) -> dict[str, float]:
-    """`init: data` integrators start at the record's first sample of their own column (as `sdnn simulate`)."""
-    return {b.name: float(data.columns[b.name][0]) for b in chart.blocks
-            if b.kind == "integrator" and b.init == "data"}
+    """`init: data` integrators start at the record's first sample of their output's column (as `sdnn simulate`)."""
+    return {b.name: float(data.columns[b.data_column][0]) for b in chart.blocks if b.data_column is not None}
 
 
 def oracle_rows(chart: Diagram, data: Dataset, alignment: str, steps: int, names: Sequence[str]) -> np.ndarray:

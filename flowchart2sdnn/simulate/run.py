@@ -33,7 +33,8 @@ def simulation_columns(diagram: Diagram) -> list[str]:
 
 
 def _data_init_outputs(diagram: Diagram) -> list[str]:
-    return [b.name for b in diagram.blocks if b.kind == "integrator" and b.init == "data"]
+    columns = [b.data_column for b in diagram.blocks if b.data_column is not None]
+    return list(dict.fromkeys(columns))  # two integrators may start from one output (`measured_by`)
 
 
 def simulate_chart(diagram: Diagram, data: Dataset, alignment: str = "zoh", continuous: bool = False,
@@ -65,12 +66,13 @@ def simulate_chart(diagram: Diagram, data: Dataset, alignment: str = "zoh", cont
     """
     inits = _data_init_outputs(diagram)
     u = np.column_stack([data.columns[n] for n in diagram.input_names])
-    init = {n: float(data.columns[n][0]) for n in inits}
+    init = {n: float(data.columns[n][0]) for n in inits}  # the network's: by data column
     time = data.time if data.time is not None else np.arange(data.n_rows) * diagram.sample_time
     if continuous:
         from .continuous import simulate_continuous
 
-        result = simulate_continuous(diagram, u, init=init, signals=all_signals)
+        by_block = {b.name: init[b.data_column] for b in diagram.blocks if b.data_column is not None}
+        result = simulate_continuous(diagram, u, init=by_block, signals=all_signals)
         if all_signals:
             return {"time": time, **{k: np.asarray(v) for k, v in result.items() if k not in diagram.input_names}}
         return {"time": time, **{n: result[:, i] for i, n in enumerate(diagram.output_names)}}
