@@ -70,8 +70,9 @@ def test_stop_describes_the_whole_run():
     r = diagnose(chart("one_mass"), train, [val], DiagnoseSettings(rounds=3), EFFECTS).report
     assert r["first_fit"]["converged"] is True
     assert r["accepted"] and r["n_accepted"] == len(r["accepted"])
-    assert len(r["rounds"]) > len(r["accepted"])  # a last round accepted nothing
     assert r["last_round"] in ("nothing_accepted", "nothing_significant")
+    # a last round refitted and accepted nothing, or found nothing significant to refit
+    assert len(r["rounds"]) > len(r["accepted"]) or r["last_round"] == "nothing_significant"
     assert r["stop"] == "done_after_accepting"
     assert "stopped: effects were accepted" in format_report(r)
 

@@ -41,7 +41,7 @@ def test_the_acceleration_is_the_damped_solve_of_the_exact_second_derivative():
     np.testing.assert_allclose(out, du + 0.5 * a, rtol=1e-7)
 
 
-def test_a_step_that_bends_more_than_alpha_is_refused():
+def test_a_step_that_bends_more_than_alpha_falls_back_to_the_plain_step():
     rng = np.random.default_rng(4)
     J = rng.normal(size=(5, 2))
     u = np.zeros(2)
@@ -54,8 +54,12 @@ def test_a_step_that_bends_more_than_alpha_is_refused():
     du = np.linalg.solve(A, J.T @ e)
     point = lm_module._Point(u, u, e, J, 0.5 * float(e @ e))
     bounds = Bounds.make(["a", "b"], None, None)
-    assert lm_module._accelerated(lambda x: residual(x) + 1.0, bounds, point, J, J, A, None, du, 0.0, 0.75,
-                                  lm_module._Counters()) is None
+    out = lm_module._accelerated(lambda x: residual(x) + 1.0, bounds, point, J, J, A, None, du, 0.0, 0.75,
+                                 lm_module._Counters())
+    np.testing.assert_array_equal(out, du)
+    bent = lm_module._accelerated(lambda x: residual(x) + 1.0, bounds, point, J, J, A, None, 1e-4 * du, 0.0, 0.75,
+                                  lm_module._Counters())
+    assert not np.array_equal(bent, 1e-4 * du)  # a short step on the same curve is bent
 
 
 @pytest.mark.parametrize("scale", ["none", "jac"])

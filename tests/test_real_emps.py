@@ -109,21 +109,25 @@ def test_asymmetric_viscous_friction_is_found_and_lowers_the_test_error(runs):
     assert fvp.ci95[0] < 166.7 < fvp.ci95[1] and fvm.ci95[0] < 240.4 < fvm.ci95[1]
 
 
-def test_diagnose_from_the_viscous_only_chart_adds_the_asymmetric_friction(runs):
+def test_diagnose_from_the_viscous_only_chart_adds_friction_at_the_speed(runs):
     """Issue 16's before/after: one round of diagnose from the chart without Coulomb friction and offset, on
-    train.csv alone (its validation: the last 30 % of train), accepts the physical `coulomb` option of friction
-    at the speed; refitted on all of train.csv it is the hand-written asymmetric chart (same test RMSE, Fv + dFv
-    = Fvp, Fv = Fvm) and cuts the protocol's test RMSE by more than 10x (88.1 -> 5.70 mm measured)."""
+    train.csv alone (its validation: the last 30 % of train), accepts friction at the speed; refitted on all of
+    train.csv it cuts the protocol's test RMSE by more than 10x and does at least as well as the hand-written
+    asymmetric chart (88.1 -> 3.42 mm measured with a learned curve, the effect's option chosen since the
+    trainer's geodesic steps; 5.70 mm before, with the physical `coulomb` option, which is then exactly that
+    chart: Fv + dFv = Fvp, Fv = Fvm)."""
     ex = _example()
     train, test = ex.records()
     viscous = ex.viscous_only(sd.load_chart(ex.CHART))
     before, _ = ex.protocol(viscous, train, test)
     d = sd.diagnose(viscous, train, rounds=1)
-    assert d.report["accepted"][0] == {"effect": "friction", "at": "v", "option": "coulomb", "label": "coulomb"}
+    first = d.report["accepted"][0]
+    assert (first["effect"], first["at"]) == ("friction", "v")
     after, result = ex.protocol(d.diagram, train, test)
     assert after < before / 10
     rmse_asym, asym = runs["asymmetric"]
-    assert after == pytest.approx(rmse_asym, rel=0.02)
-    p, q = result.values, asym.values
-    assert p["Fv"] + p["dFv_v"] == pytest.approx(q["Fvp"], rel=0.02)
-    assert p["Fv"] == pytest.approx(q["Fvm"], rel=0.02)
+    assert after <= 1.02 * rmse_asym
+    if first["label"] == "coulomb":
+        p, q = result.values, asym.values
+        assert p["Fv"] + p["dFv_v"] == pytest.approx(q["Fvp"], rel=0.02)
+        assert p["Fv"] == pytest.approx(q["Fvm"], rel=0.02)

@@ -540,11 +540,6 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
         if opt.geodesic > 0 and residual is not None:
             du = _accelerated(residual, bounds, point, Ju, Js if scale is not None else Ju, A, scale, du, mu,
                               opt.geodesic, counters)
-            if du is None:  # the step bends too much for its length: damp it more
-                mu = mu_refused(mu, opt.mu_inc, math.inf)
-                if mu > opt.mu_max:
-                    return "mu_max", None, mu, False
-                continue
         u_t = point.u + du
         x_t = bounds.to_external(u_t)
         tiny = float(np.linalg.norm(x_t - point.x)) <= opt.min_rel_step * (opt.min_rel_step + x_norm)
@@ -566,8 +561,9 @@ def _accelerated(residual, bounds: Bounds, point: _Point, Ju, Jd, A, scale, du, 
     """The step with geodesic acceleration (Transtrum & Sethna, arXiv:1201.5885, 2012): du + a/2, where a solves
     the same damped system for the residuals' second derivative along du (one extra residual evaluation, by
     finite differences). In a narrow curved valley the plain step leaves the valley and is cut back to a crawl;
-    the acceleration bends it along. None when the bend is too large for the step, 2|a|/|du| > alpha (the
-    quadratic model is not to be trusted there)."""
+    the acceleration bends it along. Where the bend is large for the step, 2|a|/|du| > alpha, the quadratic model
+    is not to be trusted and the plain step is tried (refusing it instead raises mu: measured, a tank chart's fit
+    then took 376 iterations instead of 9)."""
     u_h = point.u + GEODESIC_H * du
     e_h = _call_residual(residual, bounds.to_external(u_h), counters)
     if e_h is None:
@@ -581,7 +577,7 @@ def _accelerated(residual, bounds: Bounds, point: _Point, Ju, Jd, A, scale, du, 
             acc = acc / scale
         s = 1.0 if scale is None else scale
         if not 2.0 * float(np.linalg.norm(acc * s)) <= alpha * float(np.linalg.norm(du * s)):
-            return None
+            return du
     return du + 0.5 * acc
 
 
