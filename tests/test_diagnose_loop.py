@@ -156,7 +156,11 @@ def test_shooting_reaches_the_full_fits():
     stages = d.nominal.identification.to_document()["shooting"]["stages"]
     assert [s["length"] for s in stages] == [500, 2000, 5999]
     assert d.report["accepted"][0]["effect"] == "friction"
-    assert [s["length"] for s in d.report["final"]["shooting"]["stages"]] == [500, 2000, 5999]
+    final = d.report["final"]
+    if "shooting" in final:  # the polished fit ran with the same stages ...
+        assert [s["length"] for s in final["shooting"]["stages"]] == [500, 2000, 5999]
+    else:  # ... unless the brief refit validated better and was kept (diagnose.loop: "stop early there")
+        assert final["optimizer"]["iterations"] <= DiagnoseSettings().refit_iter
     with pytest.raises(ValueError, match="shooting"):
         DiagnoseSettings(shooting=1)
     runner = CliRunner()
