@@ -66,17 +66,19 @@ def main(settings: list[str], substeps: str | None, plants: list[str] | None = N
         train, val = tmp / f"{name}_train.csv", tmp / f"{name}_val.csv"
         _cli("excite", str(plant), "--seconds", "30", "--seed", "1", "--noise", str(NOISE), "-o", str(train))
         _cli("excite", str(plant), "--seconds", "3", "--seed", "2", "--noise", str(NOISE), "-o", str(val))
-        for shooting in settings:
-            out = tmp / f"{name}_{shooting}.json"
+        for setting in settings:
+            shooting, _, starts = setting.partition(":")  # "120:free": --shooting 120 --shooting-starts free
+            out = tmp / f"{name}_{shooting}_{starts}.json"
             t0 = time.time()
             _cli("identify", str(train), "--diagram", str(chart), "--validate", str(val), "-o", str(out),
-                 "--no-floor-bias", "--shooting", shooting, *(["--substeps", substeps] if substeps else []))
+                 "--no-floor-bias", "--shooting", shooting,
+                 *(["--shooting-starts", starts] if starts else []), *(["--substeps", substeps] if substeps else []))
             wall = time.time() - t0
             result = json.loads(out.read_text())
             rms = result["fit"]["validation"]["rms"]
             err = max(abs(result["parameters"][p]["value"] / v - 1) * 100 for p, v in TRUTH.items())
             kept = result.get("shooting", {}).get("final_length", "whole")
-            print(f"{name:9} {shooting:8} {rms['w1']:10.4f} {rms['w2']:10.4f} {err:13.2f} {kept!s:>7} {wall:6.0f}")
+            print(f"{name:9} {setting:8} {rms['w1']:10.4f} {rms['w2']:10.4f} {err:13.2f} {kept!s:>7} {wall:6.0f}")
 
 
 if __name__ == "__main__":
