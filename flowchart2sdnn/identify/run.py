@@ -124,6 +124,8 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     if settings.shooting == "auto":  # the rule reads the records (identify.shootauto); the window has no shooting
         auto = choose_shooting(problem, x0) if problem.names and not settings.online else None
         settings = replace(settings, shooting=auto.length or "off" if auto is not None else "off")
+    if settings.shooting_starts == "auto":  # free on the records auto found chaotic (identify.settings)
+        settings = replace(settings, shooting_starts="free" if auto is not None and auto.length else "data")
     if not problem.names:
         out = _Outcome(x0, "nothing_to_fit", "every parameter and curve is fixed; only the fit was evaluated", False)
     elif settings.online:

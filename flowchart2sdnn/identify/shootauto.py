@@ -38,12 +38,16 @@ import numpy as np
 
 from .initstate import state_neurons
 from .problem import Problem
-from .shooting import MAX_SEGMENTS, stage_lengths
+from .shooting import GROWTH, MAX_SEGMENTS, stage_lengths
 
-__all__ = ["ShootingChoice", "choose_shooting", "amplification", "GROWTH_BOUND", "DELTA"]
+__all__ = ["ShootingChoice", "choose_shooting", "amplification", "GROWTH_BOUND", "DELTA", "SHORTER"]
 
 #: A start's error grown this many times (in units of each state's RMS) ends the predictable horizon.
 GROWTH_BOUND = 1000.0
+#: The first stage is this many times shorter than one Lyapunov time of the chart at its `init` (two merges,
+#: GROWTH ** 2): the rough chart's growth is not the truth's (module docstring), and the merging stages find the
+#: predictable length from the data (identify.shooting's refusal rule).
+SHORTER = GROWTH ** 2
 #: The moved start: this many times the state's RMS (small enough to stay linear up to GROWTH_BOUND).
 DELTA = 1e-7
 
@@ -57,11 +61,13 @@ class ShootingChoice:
     peak: float  # the largest amplification met
     longest: int  # the longest training record, samples
     reason: str
+    lyapunov: int | None = None  # one Lyapunov time of the chart at its init, samples (None: no growth found)
 
     def to_dict(self) -> dict:
         return {"chose": self.length if self.length is not None else "off", "horizon_samples": self.horizon,
-                "peak_amplification": self.peak if np.isfinite(self.peak) else None,  # None: it overflowed "growth_bound": GROWTH_BOUND, "longest_record": self.longest,
-                "reason": self.reason}
+                "peak_amplification": self.peak if np.isfinite(self.peak) else None,  # None: it overflowed
+                "growth_bound": GROWTH_BOUND, "longest_record": self.longest,
+                "lyapunov_samples": self.lyapunov, "reason": self.reason}
 
 
 def amplification(compiled, theta: np.ndarray, inputs: np.ndarray, init=None) -> np.ndarray:
@@ -104,12 +110,16 @@ def choose_shooting(problem: Problem, theta: np.ndarray) -> ShootingChoice:
                               "single shooting follows the records")
     total = sum(len(s.inputs) for s in problem.segments)
     fewest = -(-total // MAX_SEGMENTS)
-    length = max(2, int(horizon / np.log(GROWTH_BOUND)), fewest)
+    lyapunov = int(horizon / np.log(GROWTH_BOUND))
     why = (f"a moved start grows {GROWTH_BOUND:g}-fold after {horizon} samples")
-    if not stage_lengths(length, longest):
+    if not stage_lengths(max(2, lyapunov, fewest), longest):
         return ShootingChoice(None, horizon, peak, longest,
-                              why + f", not shorter than the longest record ({longest} samples): single shooting")
-    why += f" (one Lyapunov time: {horizon} / ln {GROWTH_BOUND:g} = {int(horizon / np.log(GROWTH_BOUND))})"
-    if length > int(horizon / np.log(GROWTH_BOUND)):
-        why += f"; raised to {length} to keep at most {MAX_SEGMENTS} segments"
-    return ShootingChoice(length, horizon, peak, longest, why + f": segments of {length} samples")
+                              why + f", not shorter than the longest record ({longest} samples): single shooting",
+                              lyapunov)
+    length = max(2, lyapunov // SHORTER, fewest)
+    why += (f" (one Lyapunov time: {horizon} / ln {GROWTH_BOUND:g} = {lyapunov}); the first stage "
+            f"{SHORTER}x shorter, {lyapunov // SHORTER}")
+    if length > lyapunov // SHORTER:
+        why += f", raised to {length} to keep at most {MAX_SEGMENTS} segments"
+    return ShootingChoice(length, horizon, peak, longest, why + f": segments of {length} samples, merged while "
+                          "predictable", lyapunov)
