@@ -50,7 +50,7 @@ def _with_inits(text: str, factors: dict, set_value: dict | None = None) -> str:
     return text
 
 
-def main(settings: list[str], substeps: str | None, plants: list[str] | None = None) -> None:
+def main(settings: list[str], substeps: str | None, plants: list[str] | None = None, seed: int = 1) -> None:
     tmp = Path(tempfile.mkdtemp(prefix="bench_chaotic_"))
     print(f"{'plant':9} {'shooting':8} {'val RMS w1':>10} {'val RMS w2':>10} {'max lin err %':>13} "
           f"{'kept L':>7} {'s':>6}")
@@ -64,8 +64,8 @@ def main(settings: list[str], substeps: str | None, plants: list[str] | None = N
         chart = tmp / f"{name}_chart.yaml"
         chart.write_text(_with_inits(plant_text, {**ROUGH, effect: 1.2}).replace("substeps: 1 ", "substeps: auto "))
         train, val = tmp / f"{name}_train.csv", tmp / f"{name}_val.csv"
-        _cli("excite", str(plant), "--seconds", "30", "--seed", "1", "--noise", str(NOISE), "-o", str(train))
-        _cli("excite", str(plant), "--seconds", "3", "--seed", "2", "--noise", str(NOISE), "-o", str(val))
+        _cli("excite", str(plant), "--seconds", "30", "--seed", str(seed), "--noise", str(NOISE), "-o", str(train))
+        _cli("excite", str(plant), "--seconds", "3", "--seed", str(seed + 1), "--noise", str(NOISE), "-o", str(val))
         for setting in settings:
             shooting, _, starts = setting.partition(":")  # "120:free": --shooting 120 --shooting-starts free
             out = tmp / f"{name}_{shooting}_{starts}.json"
@@ -88,9 +88,14 @@ if __name__ == "__main__":
         i = args.index("--substeps")
         n = args[i + 1]
         del args[i:i + 2]
+    seed = 1
+    if "--seed" in args:
+        i = args.index("--seed")
+        seed = int(args[i + 1])
+        del args[i:i + 2]
     chosen = []
     while "--plant" in args:
         i = args.index("--plant")
         chosen.append(args[i + 1])
         del args[i:i + 2]
-    main(args or ["off", "auto", "200"], n, chosen or None)
+    main(args or ["off", "auto", "200"], n, chosen or None, seed)

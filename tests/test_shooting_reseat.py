@@ -9,6 +9,8 @@ and leave every other start alone.
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
 
@@ -17,7 +19,8 @@ from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.identify.problem import build_problem
 from flowchart2sdnn.identify.shooting import Segmented, reseat
 from flowchart2sdnn.simulate.continuous import simulate_continuous
-from test_shooting_auto import PENDULUM
+
+PENDULUM = Path(__file__).resolve().parent / "data" / "shooting" / "pendulum_plant.yaml"
 
 
 def _segmented(length: int = 25, q: int = 400):
