@@ -173,3 +173,28 @@ def test_auto_fits_the_chaotic_pendulum_with_free_starts_and_reports_its_horizon
                     ).extra["shooting"]["starts"] == "data"
     chart, data = _pendulum(0.2)
     assert identify(chart, data, settings=IdentifySettings(floor_bias=False)).extra["shooting"]["auto"]["chose"] == "off"
+
+
+def test_auto_takes_a_second_look_when_single_shooting_misses_a_chaotic_record():
+    # at b 0.55, k 0.95 the chart forgets a moved start on the chaotic record (growth 5.3, under the 1000 bound but
+    # above the stable charts' 4): auto chooses off, single shooting ends far off the noise floor, and the retry in
+    # the shortest segments (999 samples in 256: 4) is kept and finds the oracle's pendulum (b 0.5, k 1.0; k to
+    # 3 % from 0.4 s segments). On the periodic record single shooting reaches the floor: no second look.
+    from dataclasses import replace
+
+    for drive, chaotic in ((1.15, True), (0.2, False)):
+        chart, data = _pendulum(drive)
+        rough = {"b": 0.55, "k": 0.95}
+        chart = replace(chart, parameters=tuple(replace(p, init=rough[p.name]) for p in chart.parameters))
+        res = identify(chart, data, settings=IdentifySettings(floor_bias=False))
+        auto = res.extra["shooting"]["auto"]
+        assert auto["chose"] == "off"
+        if not chaotic:
+            assert "second_look" not in auto and res.extra["shooting"]["stages"] == []
+            continue
+        look = auto["second_look"]
+        assert look["kept"] == "multiple shooting" and look["length"] == 4 and look["starts"] == "free"
+        assert look["cost_per_sample"] < look["single_shooting_cost_per_sample"]
+        assert res.extra["shooting"]["length"] == 4 and res.extra["shooting"]["predictable"] is False
+        assert res.parameters["b"].value == pytest.approx(0.5, rel=0.02)
+        assert res.parameters["k"].value == pytest.approx(1.0, rel=0.03)

@@ -38,9 +38,10 @@ import numpy as np
 
 from .initstate import state_neurons
 from .problem import Problem
-from .shooting import GROWTH, MAX_SEGMENTS, stage_lengths
+from .shooting import GROWTH, MAX_SEGMENTS, NOISE_MARGIN, noise_level, stage_lengths
 
-__all__ = ["ShootingChoice", "choose_shooting", "amplification", "GROWTH_BOUND", "DELTA", "SHORTER"]
+__all__ = ["ShootingChoice", "choose_shooting", "amplification", "GROWTH_BOUND", "DELTA", "SHORTER", "SUSPECT_PEAK",
+           "second_look"]
 
 #: A start's error grown this many times (in units of each state's RMS) ends the predictable horizon.
 GROWTH_BOUND = 1000.0
@@ -48,6 +49,9 @@ GROWTH_BOUND = 1000.0
 #: GROWTH ** 2): the rough chart's growth is not the truth's (module docstring), and the merging stages find the
 #: predictable length from the data (identify.shooting's refusal rule).
 SHORTER = GROWTH ** 2
+#: auto's second look (:func:`second_look`) is for charts whose probe grew a moved start more than this: beyond
+#: the stable charts' 95th percentile (3.9 over the test suite's fits; module docstring).
+SUSPECT_PEAK = 4.0
 #: The moved start: this many times the state's RMS (small enough to stay linear up to GROWTH_BOUND).
 DELTA = 1e-7
 
@@ -62,12 +66,14 @@ class ShootingChoice:
     longest: int  # the longest training record, samples
     reason: str
     lyapunov: int | None = None  # one Lyapunov time of the chart at its init, samples (None: no growth found)
+    second_look: dict | None = None  # after `off`: the multiple-shooting retry (:func:`second_look`), if any
 
     def to_dict(self) -> dict:
         return {"chose": self.length if self.length is not None else "off", "horizon_samples": self.horizon,
                 "peak_amplification": self.peak if np.isfinite(self.peak) else None,  # None: it overflowed
                 "growth_bound": GROWTH_BOUND, "longest_record": self.longest,
-                "lyapunov_samples": self.lyapunov, "reason": self.reason}
+                "lyapunov_samples": self.lyapunov, "reason": self.reason,
+                **({"second_look": self.second_look} if self.second_look is not None else {})}
 
 
 def amplification(compiled, theta: np.ndarray, inputs: np.ndarray, init=None) -> np.ndarray:
@@ -123,3 +129,28 @@ def choose_shooting(problem: Problem, theta: np.ndarray) -> ShootingChoice:
         why += f", raised to {length} to keep at most {MAX_SEGMENTS} segments"
     return ShootingChoice(length, horizon, peak, longest, why + f": segments of {length} samples, merged while "
                           "predictable", lyapunov)
+
+
+def second_look(problem: Problem, choice: ShootingChoice | None, cost: float) -> int | None:
+    """After auto chose ``off``: the segment length to fit again with multiple shooting, or None.
+
+    The probe reads the chart at its rough `init`, and a rough chart need not be chaotic where the truth is: on
+    the backlash bench (benchmarks/bench_chaotic.py, N = 6) the rough chart grew a moved start 4056-6688-fold on
+    the 30 s records of seeds 1 and 3 but only 5.9-153-fold on seeds 5-15 (the truth: 9e6 at N = 1), and single
+    shooting from it ends in a local minimum at 27x the noise (seed 5). So when single shooting (`cost`, 0.5 sum
+    of squares) ends off the noise floor (its residual RMS more than NOISE_MARGIN times the noise estimated from
+    the records' second differences, the refusal rule's floor) on a chart whose probe grew more than
+    SUSPECT_PEAK, the fit is tried again from the `init` in segments of the shortest length that keeps
+    MAX_SEGMENTS (the merging stages find the predictable length); the caller keeps the lower cost per sample.
+    Charts at the floor, and those whose probe stays with the stable ones, are left as they were.
+    """
+    if choice is None or choice.length is not None or not choice.peak > SUSPECT_PEAK:
+        return None
+    if problem.compiled.estimates_starts or problem.record_params:  # shooting refuses them (FIT006)
+        return None
+    m = sum(s.targets.size for s in problem.segments)
+    if not cost / max(1, m) > 0.5 * NOISE_MARGIN ** 2 * noise_level(problem):
+        return None
+    total = sum(len(s.inputs) for s in problem.segments)
+    length = max(2, -(-total // MAX_SEGMENTS))
+    return length if stage_lengths(length, choice.longest) else None
