@@ -52,7 +52,7 @@ from .result import (
     RecordInfo,
 )
 from .settings import MIN_REL_COST_CHANGE, IdentifySettings
-from .shootauto import SUSPECT_PEAK, choose_shooting, second_look
+from .shootauto import SUSPECT_PEAK, chaotic_at, choose_shooting, second_look
 from .shooting import kept_stage
 from .workers import fit_start, fit_task, quasi_online_start, run_quasi_online_start, run_start
 
@@ -295,11 +295,17 @@ def _second_look(problem: Problem, x0, lower, upper, settings: IdentifySettings,
     kept = kept_stage(again.lm.stages) if again.lm is not None and again.lm.stages else None
     per = kept["cost_per_sample"] if kept is not None else None
     better = not again.interrupted and per is not None and per < out.lm.cost / m
+    segmented = better and kept is not again.lm.stages[-1]
+    chaos = chaotic_at(problem, np.asarray(again.x, dtype=float)) if segmented else None
+    reason = (f"single shooting ended off the noise floor on a chart whose moved start grew {auto.peak:.3g}-fold "
+              f"(> {SUSPECT_PEAK:g}): tried again in segments of {length} samples")
+    if chaos is False:  # a short stage kept, but the chart at its fit forgets a moved start: not chaos
+        better = False
+        reason += ("; its segmented stage was kept but the chart at that fit is not chaotic (a moved start does "
+                   "not grow 1000-fold): single shooting kept")
     look = {"single_shooting_cost_per_sample": out.lm.cost / m, "length": length,
-            "starts": again_settings.shooting_starts, "cost_per_sample": per,
-            "kept": "multiple shooting" if better else "single shooting",
-            "reason": f"single shooting ended off the noise floor on a chart whose moved start grew "
-                      f"{auto.peak:.3g}-fold (> {SUSPECT_PEAK:g}): tried again in segments of {length} samples"}
+            "starts": again_settings.shooting_starts, "cost_per_sample": per, "chaotic_at_fit": chaos,
+            "kept": "multiple shooting" if better else "single shooting", "reason": reason}
     auto = replace(auto, second_look=look)
     return (again, again_settings, auto) if better else (out, settings, auto)
 

@@ -41,7 +41,7 @@ from .problem import Problem
 from .shooting import GROWTH, MAX_SEGMENTS, NOISE_MARGIN, noise_level, stage_lengths
 
 __all__ = ["ShootingChoice", "choose_shooting", "amplification", "GROWTH_BOUND", "DELTA", "SHORTER", "SUSPECT_PEAK",
-           "second_look"]
+           "second_look", "chaotic_at"]
 
 #: A start's error grown this many times (in units of each state's RMS) ends the predictable horizon.
 GROWTH_BOUND = 1000.0
@@ -141,8 +141,12 @@ def second_look(problem: Problem, choice: ShootingChoice | None, cost: float) ->
     of squares) ends off the noise floor (its residual RMS more than NOISE_MARGIN times the noise estimated from
     the records' second differences, the refusal rule's floor) on a chart whose probe grew more than
     SUSPECT_PEAK, the fit is tried again from the `init` in segments of the shortest length that keeps
-    MAX_SEGMENTS (the merging stages find the predictable length); the caller keeps the lower cost per sample.
-    Charts at the floor, and those whose probe stays with the stable ones, are left as they were.
+    MAX_SEGMENTS (the merging stages find the predictable length). The caller keeps it when it costs less per
+    sample and, if its result is a segmented stage (a longer one refused), the chart at that stage's fit is
+    chaotic by the probe's own rule (:func:`chaotic_at`): a wrong initial state also spoils the longer stages
+    of a chart that forgets its start (tests/test_init_estimate.py's untwisted shaft: growth 8.0, single
+    shooting 6.8x the noise, the 8-sample stage kept), and that is not chaos. Charts at the floor, and those
+    whose probe stays with the stable ones, are left as they were.
     """
     if choice is None or choice.length is not None or not choice.peak > SUSPECT_PEAK:
         return None
@@ -154,3 +158,9 @@ def second_look(problem: Problem, choice: ShootingChoice | None, cost: float) ->
     total = sum(len(s.inputs) for s in problem.segments)
     length = max(2, -(-total // MAX_SEGMENTS))
     return length if stage_lengths(length, choice.longest) else None
+
+
+
+def chaotic_at(problem: Problem, theta: np.ndarray) -> bool:
+    """Whether a moved start grows GROWTH_BOUND-fold within the records at `theta` (auto's probe)."""
+    return choose_shooting(problem, theta).horizon is not None
