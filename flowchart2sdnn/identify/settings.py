@@ -98,7 +98,8 @@ class IdentifySettings:
                              until single shooting over whole records, whose fit is the result (identify.shooting;
                              a merge that raises the cost per sample more than MERGE_RISE is refused and the
                              stage before is the result); "off": single shooting only; "auto": L or off chosen
-                             from how fast a moved start grows along the records (identify.shootauto)
+                             from how fast a moved start grows along the records, with a second look after off
+                             when single shooting ends off the noise floor (identify.shootauto)
     shooting_starts : str    "auto", "data" or "free": the measured states' start at each segment (:data:`SHOOTING_STARTS`)
     threads : int            threads for multiple shooting's segments within one fit in this process (the kernels
                              release the GIL); fits in worker processes (an executor) use one

@@ -20,9 +20,16 @@ predictable horizon H is the first sample where a(t) reaches GROWTH_BOUND:
 
 * a(t) < GROWTH_BOUND on every record: ``off`` (a free run follows the record; single shooting, unchanged);
 * otherwise the growth is exponential, a(t) ~ exp(lambda t) with lambda = ln(GROWTH_BOUND) / H (a finite-time
-  Lyapunov exponent), and L = H / ln(GROWTH_BOUND) samples: one Lyapunov time, so a start's error grows at
-  most e-fold within a segment. L is raised to the fewest samples that keep MAX_SEGMENTS segments; ``off``
-  when L is not shorter than the longest record.
+  Lyapunov exponent), and one Lyapunov time H / ln(GROWTH_BOUND) samples, over which a start's error grows
+  e-fold; ``off`` when that is not shorter than the longest record. Else the first stage's L is SHORTER times
+  shorter, raised to the fewest samples that keep MAX_SEGMENTS segments, and the measured states start free
+  (identify.settings.SHOOTING_STARTS "auto"). Why shorter: the rough chart's growth is not the truth's (the
+  backlash bench's rough chart, N = 6: one Lyapunov time 1118 samples on seed 1's record, and single shooting
+  from there ended at 13x the noise, 0.361/0.181 on the validation; from 118 with free starts the kept stage
+  is at the noise, 0.0110/0.0110), and the merging stages find the predictable length from the data.
+* after ``off``, :func:`second_look`: single shooting that ends off the noise floor on a chart whose growth
+  exceeded SUSPECT_PEAK is tried again with multiple shooting (the probe said off on 6 of 8 of the backlash
+  bench's records, where the truth is chaotic).
 
 GROWTH_BOUND = 1000: a thousandfold growth of a start's error is well beyond the non-normal transients of the
 stable charts (at most 12 measured, see above), and L depends on it only through the estimate of lambda.
