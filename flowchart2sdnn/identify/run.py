@@ -292,9 +292,11 @@ def _second_look(problem: Problem, x0, lower, upper, settings: IdentifySettings,
     m = max(1, sum(s.targets.size for s in problem.segments))
     again_settings = replace(settings, shooting=length, shooting_starts="free" if starts == "auto" else starts)
     again = _offline(problem, x0, lower, upper, again_settings, progress, stop, executor)
+    if again.interrupted:  # Ctrl-C during the retry: its point so far, as any interrupted fit
+        return again, again_settings, auto
     kept = kept_stage(again.lm.stages) if again.lm is not None and again.lm.stages else None
     per = kept["cost_per_sample"] if kept is not None else None
-    better = not again.interrupted and per is not None and per < out.lm.cost / m
+    better = per is not None and per < out.lm.cost / m
     segmented = better and kept is not again.lm.stages[-1]
     chaos = chaotic_at(problem, np.asarray(again.x, dtype=float)) if segmented else None
     reason = (f"single shooting ended off the noise floor on a chart whose moved start grew {auto.peak:.3g}-fold "

@@ -167,7 +167,6 @@ def second_look(problem: Problem, choice: ShootingChoice | None, cost: float) ->
     return length if stage_lengths(length, choice.longest) else None
 
 
-
 def chaotic_at(problem: Problem, theta: np.ndarray) -> bool:
     """Whether a moved start grows GROWTH_BOUND-fold within the records at `theta` (auto's probe)."""
     return choose_shooting(problem, theta).horizon is not None

@@ -389,7 +389,7 @@ def shooting_fit(problem: Problem, start: np.ndarray, lower, upper, options: LMO
 
 def _fit_reseating(seg: Segmented, fit, x0: np.ndarray):
     """(the stage's LMResult, segments reseated): `fit` from x0, then up to RESEAT_ROUNDS times from the same
-    point with the outlying segments' starts reseated (:func:`outliers`), kept while that lowers the cost."""
+    point with the outlying segments' starts reseated (:func:`reseat`), kept while that lowers the cost."""
     r = fit(x0)
     total, iterations = 0, r.iterations
     for _ in range(RESEAT_ROUNDS):
