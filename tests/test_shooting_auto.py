@@ -53,12 +53,16 @@ def _linear_problem(tmp_path, a: float, q: int = 10000):
 
 def test_auto_on_a_growing_linear_chart_matches_the_hand_computation(tmp_path):
     # x' = a x: a moved start grows as e^{a t} exactly (in units of the state's RMS), so it reaches 1000-fold
-    # at t = ln(1000) / a = 3.454 s (3454 samples) and one Lyapunov time is 1 / a = 0.5 s = 500 samples
+    # at t = ln(1000) / a = 3.454 s (3454 samples) and one Lyapunov time is 1 / a = 0.5 s = 500 samples; the
+    # first stage is 16x shorter, 31 samples (5000 samples in at most 256 segments need only 20)
     a = 2.0
-    choice = choose_shooting(_linear_problem(tmp_path, a), np.array([a]))
+    choice = choose_shooting(_linear_problem(tmp_path, a, q=5000), np.array([a]))
     horizon = math.log(GROWTH_BOUND) / a / 0.001
     assert choice.horizon == pytest.approx(horizon, rel=0.01)
-    assert choice.length == pytest.approx(1 / a / 0.001, rel=0.01)
+    assert choice.lyapunov == pytest.approx(1 / a / 0.001, rel=0.01)
+    assert choice.length == pytest.approx(1 / a / 0.001 / 16, abs=1)
+    # 10 000 samples need segments of at least 40 to stay within 256: the first stage is raised to that
+    assert choose_shooting(_linear_problem(tmp_path, a), np.array([a])).length == 40
 
 
 def test_auto_is_off_when_a_moved_start_decays(tmp_path):
@@ -151,3 +155,46 @@ def test_cli_auto_writes_its_choice_and_refuses_a_bad_value(tmp_path):
     bad = CliRunner().invoke(main, ["identify", str(csv), "--diagram", str(PENDULUM), "--shooting", "sometimes"])
     assert bad.exit_code == 2 and "'off', 'auto' or a segment length" in bad.output
 
+
+
+def test_auto_fits_the_chaotic_pendulum_with_free_starts_and_reports_its_horizon():
+    # the default (shooting and starts auto) on the chaotic record: a length is chosen, the measured states
+    # start each segment free, and the kept stage finds the oracle's pendulum (b 0.5, k 1.0)
+    chart, data = _pendulum(1.15)
+    res = identify(chart, data, settings=IdentifySettings(floor_bias=False))
+    shooting = res.extra["shooting"]
+    assert shooting["requested"] == "auto" and shooting["auto"]["chose"] != "off"
+    assert shooting["starts"] == "free"
+    assert shooting["auto"]["lyapunov_samples"] >= shooting["length"]
+    assert res.parameters["b"].value == pytest.approx(0.5, rel=0.02)
+    assert res.parameters["k"].value == pytest.approx(1.0, rel=0.02)
+    # a length given by hand keeps the data's starts; the periodic record keeps single shooting
+    assert identify(chart, data, settings=IdentifySettings(shooting=25, floor_bias=False, max_iter=3)
+                    ).extra["shooting"]["starts"] == "data"
+    chart, data = _pendulum(0.2)
+    assert identify(chart, data, settings=IdentifySettings(floor_bias=False)).extra["shooting"]["auto"]["chose"] == "off"
+
+
+def test_auto_takes_a_second_look_when_single_shooting_misses_a_chaotic_record():
+    # at b 0.55, k 0.95 the chart forgets a moved start on the chaotic record (growth 5.3, under the 1000 bound but
+    # above the stable charts' 4): auto chooses off, single shooting ends far off the noise floor, and the retry in
+    # the shortest segments (999 samples in 256: 4) is kept and finds the oracle's pendulum (b 0.5, k 1.0; k to
+    # 3 % from 0.4 s segments). On the periodic record single shooting reaches the floor: no second look.
+    from dataclasses import replace
+
+    for drive, chaotic in ((1.15, True), (0.2, False)):
+        chart, data = _pendulum(drive)
+        rough = {"b": 0.55, "k": 0.95}
+        chart = replace(chart, parameters=tuple(replace(p, init=rough[p.name]) for p in chart.parameters))
+        res = identify(chart, data, settings=IdentifySettings(floor_bias=False))
+        auto = res.extra["shooting"]["auto"]
+        assert auto["chose"] == "off"
+        if not chaotic:
+            assert "second_look" not in auto and res.extra["shooting"]["stages"] == []
+            continue
+        look = auto["second_look"]
+        assert look["kept"] == "multiple shooting" and look["length"] == 4 and look["starts"] == "free"
+        assert look["cost_per_sample"] < look["single_shooting_cost_per_sample"]
+        assert res.extra["shooting"]["length"] == 4 and res.extra["shooting"]["predictable"] is False
+        assert res.parameters["b"].value == pytest.approx(0.5, rel=0.02)
+        assert res.parameters["k"].value == pytest.approx(1.0, rel=0.03)

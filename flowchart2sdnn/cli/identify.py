@@ -45,9 +45,10 @@ __all__ = ["identify"]
               help="Set the validation record's initial state from its first N samples (parameters fixed), then "
                    "run free; scored from row N (EMPS: 20, CED: 4, Cascaded Tanks: 5).")
 @shooting_option()
-@click.option("--shooting-starts", type=click.Choice(["data", "free"]), default="data", show_default=True,
+@click.option("--shooting-starts", type=click.Choice(["auto", "data", "free"]), default="auto", show_default=True,
               help="Multiple shooting: measured states start each segment from the data's sample ('data') or are "
-                   "fitted like the unmeasured ones from it ('free': a noisy sample is a poor start).")
+                   "fitted like the unmeasured ones from it ('free': a noisy sample is a poor start); 'auto': "
+                   "free where --shooting auto found the records chaotic, data otherwise.")
 @click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True,
               help="Multiple shooting: run the segments of a fit on N threads in this process (same result as 1; "
                    "pays from segments of ~500 samples on, benchmarks/bench_shooting_iteration.py).")

@@ -52,7 +52,7 @@ from .result import (
     RecordInfo,
 )
 from .settings import MIN_REL_COST_CHANGE, IdentifySettings
-from .shootauto import choose_shooting
+from .shootauto import SUSPECT_PEAK, chaotic_at, choose_shooting, second_look
 from .shooting import kept_stage
 from .workers import fit_start, fit_task, quasi_online_start, run_quasi_online_start, run_start
 
@@ -124,12 +124,18 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     if settings.shooting == "auto":  # the rule reads the records (identify.shootauto); the window has no shooting
         auto = choose_shooting(problem, x0) if problem.names and not settings.online else None
         settings = replace(settings, shooting=auto.length or "off" if auto is not None else "off")
+    starts = settings.shooting_starts
+    if starts == "auto":  # free on the records auto found chaotic (identify.settings)
+        settings = replace(settings, shooting_starts="free" if auto is not None and auto.length else "data")
     if not problem.names:
         out = _Outcome(x0, "nothing_to_fit", "every parameter and curve is fixed; only the fit was evaluated", False)
     elif settings.online:
         out = _online(problem, x0, lower, upper, settings, progress, stop, executor)
     else:
         out = _offline(problem, x0, lower, upper, settings, progress, stop, executor)
+        if auto is not None and out.lm is not None and not out.interrupted:
+            out, settings, auto = _second_look(problem, x0, lower, upper, settings, starts, auto, out, progress,
+                                               stop, executor)
     if out.multistart_warning:
         warnings.append(out.multistart_warning)
     shooting = _shooting(settings, out.lm, auto) if settings.shooting != "off" or auto is not None else None
@@ -275,6 +281,36 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
                      stall_decrease=settings.converged_decrease / max(1, problem.n_residuals),
                      scale=settings.lm_scale, scale_groups=groups if settings.lm_scale == "jac" else (),
                      geodesic=settings.lm_geodesic)
+
+
+def _second_look(problem: Problem, x0, lower, upper, settings: IdentifySettings, starts: str, auto, out: _Outcome,
+                 progress, stop, executor):
+    """(outcome, settings, auto): single shooting's when auto's second look (identify.shootauto.second_look) does
+    not apply or multiple shooting does no better per sample, else multiple shooting's."""
+    length = second_look(problem, auto, out.lm.cost)
+    if length is None:
+        return out, settings, auto
+    m = max(1, sum(s.targets.size for s in problem.segments))
+    again_settings = replace(settings, shooting=length, shooting_starts="free" if starts == "auto" else starts)
+    again = _offline(problem, x0, lower, upper, again_settings, progress, stop, executor)
+    if again.interrupted:  # Ctrl-C during the retry: its point so far, as any interrupted fit
+        return again, again_settings, auto
+    kept = kept_stage(again.lm.stages) if again.lm is not None and again.lm.stages else None
+    per = kept["cost_per_sample"] if kept is not None else None
+    better = per is not None and per < out.lm.cost / m
+    segmented = better and kept is not again.lm.stages[-1]
+    chaos = chaotic_at(problem, np.asarray(again.x, dtype=float)) if segmented else None
+    reason = (f"single shooting ended off the noise floor on a chart whose moved start grew {auto.peak:.3g}-fold "
+              f"(> {SUSPECT_PEAK:g}): tried again in segments of {length} samples")
+    if chaos is False:  # a short stage kept, but the chart at its fit forgets a moved start: not chaos
+        better = False
+        reason += ("; its segmented stage was kept but the chart at that fit is not chaotic (a moved start does "
+                   "not grow 1000-fold): single shooting kept")
+    look = {"single_shooting_cost_per_sample": out.lm.cost / m, "length": length,
+            "starts": again_settings.shooting_starts, "cost_per_sample": per, "chaotic_at_fit": chaos,
+            "kept": "multiple shooting" if better else "single shooting", "reason": reason}
+    auto = replace(auto, second_look=look)
+    return (again, again_settings, auto) if better else (out, settings, auto)
 
 
 def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, progress, stop, executor) -> _Outcome:

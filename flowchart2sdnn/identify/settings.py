@@ -53,8 +53,11 @@ SHOOTING = "auto"
 #: where multiple shooting's segments start the measured states: "data" (the sample before the segment, the
 #: default) or "free" (fitted like the unmeasured ones, starting from that sample). Measured on the backlash
 #: bench (README, Multiple shooting): a noisy sample as a start keeps short segments off the noise floor (the
-#: truth's 200 stage 1.4x the noise with "data", 1.0x with "free"); opt-in until it is measured more widely
-SHOOTING_STARTS = "data"
+#: truth's 200 stage 1.4x the noise with "data", 1.0x with "free"). "auto" (the default): "free" where `shooting`
+#: "auto" chose a length (a chaotic record, whose short segments' starts the noise would spoil; the backlash
+#: bench's default run 0.0110/0.0110 on the 3 s validation with it), "data" otherwise (an L given by hand keeps
+#: what it was measured with)
+SHOOTING_STARTS = "auto"
 #: identify estimates the discretization's bias on each parameter and widens ci95 by it (identify.floorbias): with
 #: 0.01 rad/s noise (Coulomb benches, auto N, seeds 1-10) the noise-only intervals covered the truth 8 in 10 times
 #: for 13 of 21 parameters (three-mass c1 3 of 10), the widened ones for 21 of 21, at x1.24-1.33 the fit's time
@@ -101,8 +104,9 @@ class IdentifySettings:
                              until single shooting over whole records, whose fit is the result (identify.shooting;
                              a merge that raises the cost per sample more than MERGE_RISE is refused and the
                              stage before is the result); "off": single shooting only; "auto": L or off chosen
-                             from how fast a moved start grows along the records (identify.shootauto)
-    shooting_starts : str    "data" or "free": the measured states' start at each segment (:data:`SHOOTING_STARTS`)
+                             from how fast a moved start grows along the records, with a second look after off
+                             when single shooting ends off the noise floor (identify.shootauto)
+    shooting_starts : str    "auto", "data" or "free": the measured states' start at each segment (:data:`SHOOTING_STARTS`)
     threads : int            threads for multiple shooting's segments within one fit in this process (the kernels
                              release the GIL); fits in worker processes (an executor) use one
     floor_bias : bool        estimate the discretization's bias beta on each parameter by refitting the network to
@@ -154,8 +158,8 @@ class IdentifySettings:
         _need(self.shooting in ("off", "auto") or (isinstance(self.shooting, int) and not isinstance(self.shooting, bool)
                                           and self.shooting >= 2),
               f"shooting must be 'off', 'auto' or a segment length of at least 2 samples, got {self.shooting!r}")
-        _need(self.shooting_starts in ("data", "free"),
-              f"shooting_starts must be 'data' or 'free', got {self.shooting_starts!r}")
+        _need(self.shooting_starts in ("auto", "data", "free"),
+              f"shooting_starts must be 'auto', 'data' or 'free', got {self.shooting_starts!r}")
         _need(not (self.online and self.shooting not in ("off", "auto")),  # auto: off for the window
               "shooting applies to offline fits, not to the quasi-online window")
         _need(isinstance(self.threads, int) and not isinstance(self.threads, bool) and self.threads >= 1,

@@ -91,6 +91,9 @@ def _shooting(result: Identification) -> str | None:
     text = "shooting: "
     if "auto" in s:
         text += f"auto -> {s['auto']['chose']} ({s['auto']['reason']})"
+        look = s["auto"].get("second_look")
+        if look:
+            text += f"; then {look['reason']}, kept {look['kept']}"
     else:
         text += f"segments of {s['length']} samples"
     if s.get("final_length") is not None:
