@@ -115,7 +115,7 @@ def test_two_mass_mode_matches_the_hand_formula(identified):
 
     def slope(curve, w):  # d/dw of sum v tanh(a w), by hand
         a, v = np.array(result["nonlinear"][curve]["a"]), np.array(result["nonlinear"][curve]["v"])
-        return float(np.sum(v * a / np.cosh(a * w) ** 2))
+        return float(np.sum(v * a * (1.0 - np.tanh(a * w) ** 2)))
 
     # at a moving point (at rest the curves hold the drive); the curves' slopes there act as viscous terms
     # (the fit may trade d against them), so the hand model is the chart's equations with both, states w1, w2, phi
