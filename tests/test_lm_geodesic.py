@@ -85,3 +85,31 @@ def test_the_option_is_checked():
         LMOptions(geodesic=-0.1)
     with pytest.raises(ValueError, match="geodesic"):
         LMOptions(geodesic=float("nan"))
+
+
+def test_identify_cli_takes_plain_steps(tmp_path):
+    """`--lm-steps plain` is the library's lm_geodesic = 0 (the same iterates), recorded in RESULT.json."""
+    import json
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+    import flowchart2sdnn as sd
+    from flowchart2sdnn.cli import main
+
+    root = Path(__file__).resolve().parent.parent
+    chart, csv = root / "diagrams" / "engine.yaml", root / "examples" / "data" / "engine_idle.csv"
+    docs = {}
+    for steps in ("plain", "geodesic"):
+        out = tmp_path / f"{steps}.json"
+        res = CliRunner().invoke(main, ["identify", str(csv), "--diagram", str(chart), "--max-iter", "5",
+                                        "--curve-start", "random", "--no-floor-bias", "--lm-steps", steps,
+                                        "--quiet", "-o", str(out)])
+        assert res.exit_code == 0, res.output
+        docs[steps] = json.loads(out.read_text())
+    assert docs["plain"]["settings"]["lm_geodesic"] == 0.0 and docs["geodesic"]["settings"]["lm_geodesic"] == 0.75
+    lib = sd.identify(chart, sd.read_csv(csv), max_iter=5, curve_start="random", floor_bias=False, lm_geodesic=0.0)
+    assert docs["plain"]["parameters"]["J1"]["value"] == lib.parameters["J1"].value
+    assert docs["plain"]["parameters"]["J1"]["value"] != docs["geodesic"]["parameters"]["J1"]["value"]
+    bad = CliRunner().invoke(main, ["identify", str(csv), "--diagram", str(chart), "--lm-steps", "bent"])
+    assert bad.exit_code == 2
