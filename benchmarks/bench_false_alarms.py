@@ -102,11 +102,14 @@ def run_one(key: str, noise: float, seed: int, seconds: float, settings: Diagnos
     train = record(plant, seconds, seed, noise)
     val = record(plant, seconds / 2, 1000 + seed, noise)
     t0 = time.perf_counter()
-    rep = diagnose(chart, train, [val], settings).report
+    result = diagnose(chart, train, [val], settings)
+    rep = result.report
     wall = time.perf_counter() - t0
     first = rep["first_fit"]
+    trace = result.nominal.identification.optimizer
     return {"commit": _commit(), "charts": charts, "plant": key, "noise": noise, "seed": seed, "seconds": seconds, "init_factors": factors,
             "first_fit_converged": first["converged"], "first_fit_status": first["status"],
+            "first_fit_iterations": trace.iterations if trace is not None else None,
             "train_rms_before": rep["before"]["rms"],
             "stop": rep["stop"], "accepted": [f"{a['effect']}@{a['at']} ({a['label']})" for a in rep["accepted"]],
             "val_before": rep["before"]["validation_rms"], "val_after": rep["after"]["validation_rms"],
@@ -160,7 +163,8 @@ def main() -> None:
                 r = run_one(key, noise, seed, args.seconds, settings, args.charts)
                 rows.append(r)
                 print(f"| {key} | {noise:g} | {seed} | {r['substeps']} | "
-                      f"{'converged' if r['first_fit_converged'] else r['first_fit_status']} | "
+                      f"{'converged' if r['first_fit_converged'] else r['first_fit_status']} "
+                      f"({r['first_fit_iterations']} it) | "
                       f"{_f(r['train_rms_before'])} | {', '.join(r['accepted']) or 'nothing'} | "
                       f"{_f(r['val_before'])} → {_f(r['val_after'])} | {_f(r['floor'])} | {r['refused']} | "
                       f"{r['stop']} | {r['wall']:.0f} s |", flush=True)
