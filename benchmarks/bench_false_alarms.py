@@ -30,7 +30,7 @@ Measured with ``--charts physical`` (3 seeds x 3 noises x 2 plants) before the g
 accepted in 18 runs, 20-600 s a run. With it (f2404f4): 0 accepted in 17 runs, every first fit converged in
 9-50 iterations (two-mass 0.003 seed 2 not run). Learned charts, two-mass, with it: the first fit converges in
 490 (0.003 seed 1), 470 (0.01 seed 2) and 112 (0.03 seed 1) iterations, traced, nothing accepted; 0.01 seed 3
-and 0.03 seed 2 stop at 1000, not traced: 0 accepted in 5 runs, 1.5-25 min a run on a loaded core. At
+and 0.03 seeds 2-3 stop at 1000, not traced: 0 accepted in 6 runs, 1.5-25 min a run on a loaded core. At
 diagnose's old default of 100 iterations none would have converged, hence the default 1000. Not run: the other learned cells (all of three-mass).
 Tables: docs/diagnose.md. The printed first fit gives its LM iterations.
 """
