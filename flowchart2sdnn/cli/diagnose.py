@@ -73,7 +73,9 @@ def _int_list(text: str) -> tuple[int, ...]:
               help="Directory for the figures (residual against the traced signal, before and after).")
 @click.option("--refit-iter", type=click.IntRange(min=1), default=40, show_default=True,
               help="LM iterations of each brief refit of a candidate.")
-@max_iter_option("LM iterations of the first fit and of each accepted chart.")
+@max_iter_option("Safety limit on LM iterations of the first fit, a finished control and each accepted chart: "
+                 "a fit stops when it has converged; a first fit that reaches the limit is not traced.",
+                 default=1000)  # = DiagnoseSettings.max_iter (not imported here: the CLI starts fast)
 @click.option("--horizon", type=click.IntRange(min=0), default=500, show_default=True,
               help="Samples of the first stage of the growing-horizon refit of a non-neutral candidate (a gap, "
                    "clip or delay) from the chart as given; 0: off.")
