@@ -113,3 +113,19 @@ def test_identify_cli_takes_plain_steps(tmp_path):
     assert docs["plain"]["parameters"]["J1"]["value"] != docs["geodesic"]["parameters"]["J1"]["value"]
     bad = CliRunner().invoke(main, ["identify", str(csv), "--diagram", str(chart), "--lm-steps", "bent"])
     assert bad.exit_code == 2
+
+
+def test_the_cli_defaults_of_max_iter_are_the_libraries():
+    """The CLI spells the safety limits as literals (it starts without importing the library's settings)."""
+    from click.testing import CliRunner
+
+    from flowchart2sdnn.cli import main
+    from flowchart2sdnn.diagnose.fitting import DiagnoseSettings
+    from flowchart2sdnn.identify.settings import IdentifySettings
+
+    for command, settings in (("diagnose", DiagnoseSettings()), ("identify", IdentifySettings())):
+        out = CliRunner().invoke(main, [command, "--help"], terminal_width=200).output
+        text = " ".join(out.split())
+        i = text.index("--max-iter")
+        entry = text[i:text.index(" --", i + 1)]
+        assert f"default: {settings.max_iter};" in entry or f"default: {settings.max_iter}]" in entry, entry
