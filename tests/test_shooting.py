@@ -115,6 +115,48 @@ def test_segments_on_threads_give_the_same_residual_and_jacobian():
     np.testing.assert_array_equal(one.residual(x), two.residual(x))
 
 
+def test_pieces_in_one_kernel_call_equal_one_call_per_piece():
+    c = CompiledNetwork(compile_diagram(load_diagram(COULOMB)).network)
+    states = np.array([k for k, _ in state_neurons(c)], dtype=np.int64)
+    rng = np.random.default_rng(2)
+    u = rng.standard_normal((90, 1))
+    theta = c.theta0() * 1.05
+    first, last = np.array([0, 30, 55, 60]), np.array([30, 55, 60, 90])
+    hist = c.initial_history(None) + 0.1 * rng.standard_normal((4, c.flat.n_neurons))
+    y, dy = c.run_pieces(theta, u, first, last, hist, states, with_jac=True)
+    ys, _ = c.run_pieces(theta, u, first, last, hist, states)
+    for a, b, h in zip(first, last, hist, strict=True):
+        y1, dy1 = c.jacobian(theta, u[a:b], history=h, states=states)
+        np.testing.assert_array_equal(y[a:b], y1)
+        np.testing.assert_array_equal(dy[a:b], dy1)
+        np.testing.assert_array_equal(ys[a:b], c.simulate(theta, u[a:b], history=h, states=states))
+    with pytest.raises(ValueError, match="pieces must be"):
+        c.run_pieces(theta, u, [0, 50], [50, 91], hist[:2])
+    with pytest.raises(ValueError, match="histories must be"):
+        c.run_pieces(theta, u, first, last, hist[:3])
+
+
+@pytest.mark.parametrize("threads", [1, 2])
+def test_two_records_jacobian_matches_central_differences(threads):
+    chart = load_diagram(COULOMB)
+    problem = build_problem(chart, _data(COULOMB_PLANT, 130, 5, ["w1", "w2"]),
+                            more=[_data(COULOMB_PLANT, 70, 6, ["w1", "w2"])])
+    seg = Segmented(problem, 30, 2.0, threads=threads)
+    # 129 rows: 30, 30, 30, 30, 9; 69 rows: 30, 30, 9; a record's first segment starts from its own start
+    assert [(p.record, p.b - p.a) for p in seg.pieces] == [(0, 30)] * 4 + [(0, 9), (1, 30), (1, 30), (1, 9)]
+    assert seg.n_x == seg.n_theta + 6
+    rng = np.random.default_rng(3)
+    x = seg.start(problem.compiled.theta0() * 0.9)
+    x[seg.n_theta:] += 0.01 * rng.standard_normal(seg.n_x - seg.n_theta)
+    e, J = seg.fun(x)
+    J = J.toarray() if sparse.issparse(J) else J
+    np.testing.assert_array_equal(e, seg.residual(x))
+    assert e.size == (129 + 69) * 2 + 6
+    Jfd = _fd(seg.residual, x)
+    scale = np.maximum(np.abs(J).max(axis=0), 1e-12)
+    assert (np.abs(J - Jfd).max(axis=0) / scale).max() < 1e-6
+
+
 def test_our_lm_and_scipy_reach_the_same_multiple_shooting_minimum():
     problem = build_problem(load_diagram(COULOMB), _data(COULOMB_PLANT, 400, 4, ["w1", "w2"], noise=0.01))
     seg = Segmented(problem, 100, 1.0)

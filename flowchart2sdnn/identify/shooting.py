@@ -40,9 +40,10 @@ correct chart's stages all end near the noise floor and later stages cost the sa
 and a warning): validation of such a fit is meaningful on horizons up to that length only.
 
 Sensitivities: exact, by the RTRL kernel with the history's own sensitivities (kernels.jacobian_kernel's
-`s_init`): the free starts are extra columns of theta whose initial sensitivity is the identity. The segments
-are simulated separately, one kernel call each; the Jacobian is dense (segments x free states columns), so
-the number of segments is capped (MAX_SEGMENTS).
+`s_init`): the free starts are extra columns of theta whose initial sensitivity is the identity. Each segment
+is simulated from its own start, the segments of a record in one kernel call (one per thread,
+CompiledNetwork.run_pieces); the Jacobian has segments x free states extra columns, sparse, and the number of
+segments is capped (MAX_SEGMENTS).
 
 Layer: identify (below it: fit, network).
 """
@@ -152,6 +153,9 @@ class Segmented:
         # boundary count like the L output samples of a segment
         self.scale = np.ones(len(self.free)) if scale is None else np.asarray(scale, dtype=float)
         self.row_weight = self.weight * np.sqrt(self.length) / self.scale
+        self._csr = None
+        self._groups = None
+        self._records = problem.segments  # built anew at each access of the property
 
     def _shortest(self, n: int) -> int:
         total = sum(-(-len(s.inputs) // n) for s in self.problem.segments)
@@ -174,33 +178,59 @@ class Segmented:
     def history(self, x: np.ndarray, p: _Piece) -> np.ndarray:
         h = self.bases[p.record].copy()
         if p.a > 0:
-            targets = self.problem.segments[p.record].targets
+            targets = self._records[p.record].targets
             for k, o in self.measured:
                 h[k] = targets[p.a - 1, o]
             if p.column >= 0:
                 h[self.free] = x[p.column:p.column + len(self.free)]
         return h
 
+    def _chunks(self) -> list[list[int]]:
+        """The pieces' indices grouped into one kernel call each: consecutive pieces of one record, split in
+        `threads` parts per record."""
+        if self._groups is None:
+            groups = []
+            for r in range(len(self.problem.segments)):
+                own = [i for i, p in enumerate(self.pieces) if p.record == r]
+                parts = min(self.threads, len(own))
+                groups += [list(a) for a in np.array_split(own, parts) if len(a)]
+            self._groups = groups
+        return self._groups
+
+    def _histories(self, x: np.ndarray, chunk: list[int]) -> np.ndarray:
+        """:meth:`history` of each piece in `chunk`, as rows."""
+        return np.stack([self.history(x, self.pieces[i]) for i in chunk])
+
     def _runs(self, x: np.ndarray, with_jac: bool):
-        """(piece, outputs and end states, their sensitivities or None) of every segment, in order; on
-        `threads` threads (the kernels release the GIL; each segment's run is independent of the others')."""
+        """(piece, outputs and end states, their sensitivities or None) of every segment, in order; one kernel
+        call per chunk (:meth:`_chunks`), the chunks on `threads` threads (the kernels release the GIL; each
+        segment's run is independent of the others')."""
         theta = x[:self.n_theta]
         states = self.free if len(self.free) else None
         compiled = self.problem.compiled
         compiled.connection_values(theta, with_jac)  # evaluated once, before the threads share it
+        segments = self._records
 
-        def run(p: _Piece):
-            inputs, history = self.problem.segments[p.record].inputs[p.a:p.b], self.history(x, p)
-            if with_jac:
-                return p, *compiled.jacobian(theta, inputs, history=history, states=states)
-            return p, compiled.simulate(theta, inputs, history=history, states=states), None
+        def run(chunk: list[int]):
+            pieces = [self.pieces[i] for i in chunk]
+            y, dy = compiled.run_pieces(theta, segments[pieces[0].record].inputs, [p.a for p in pieces],
+                                        [p.b for p in pieces], self._histories(x, chunk), states, with_jac)
+            out, row = [], 0
+            for p in pieces:
+                n = p.b - p.a
+                out.append((p, y[row:row + n], None if dy is None else dy[row:row + n]))
+                row += n
+            return out
 
         with _interruptible():
-            if self.threads == 1 or len(self.pieces) == 1:
-                yield from map(run, self.pieces)
+            chunks = self._chunks()
+            if self.threads == 1 or len(chunks) == 1:
+                for chunk in chunks:
+                    yield from run(chunk)
                 return
             with ThreadPoolExecutor(self.threads) as pool:
-                yield from pool.map(run, self.pieces)
+                for out in pool.map(run, chunks):
+                    yield from out
 
     def residual(self, x: np.ndarray):
         x = np.asarray(x, dtype=float)
@@ -209,7 +239,7 @@ class Segmented:
         for p, y, _ in self._runs(x, False):
             if not np.all(np.isfinite(y)):
                 return None
-            es.append((self.problem.segments[p.record].targets[p.a:p.b] - y[:, :n_out]).ravel())
+            es.append((self._records[p.record].targets[p.a:p.b] - y[:, :n_out]).ravel())
             if p.column >= 0:
                 es.append(-self.row_weight * (prev - x[p.column:p.column + len(self.free)]))
             prev = y[-1, n_out:]
@@ -217,49 +247,69 @@ class Segmented:
 
     def fun(self, x: np.ndarray):
         """(e, J) with J sparse (CSR): a segment's rows have nonzeros in theta's columns and its own start's;
-        a continuity row in theta's, the previous start's and its own (columns ascending, so the rows are
-        written straight into CSR arrays)."""
+        a continuity row in theta's, the previous start's and its own. The nonzero pattern is fixed by the
+        pieces (:meth:`_pattern`), so each call only writes the values: building the pattern per call cost 40 %
+        of an iteration at L = 100 (benchmarks/bench_shooting_iteration.py)."""
         x = np.asarray(x, dtype=float)
         n_out, P, S = self.problem.compiled.n_outputs, self.n_theta, len(self.free)
+        starts, indices, indptr = self._pattern()
+        data = np.empty(len(indices))
         es, prev = [], None
-        data, indices, widths = [], [], []
-
-        def rows(values: np.ndarray, columns: np.ndarray) -> None:
-            data.append(values.ravel())
-            indices.append(np.tile(columns, values.shape[0]))
-            widths.append(np.full(values.shape[0], len(columns)))
-
-        theta_cols, none = np.arange(P), np.zeros(0, dtype=np.int64)
-        for p, y, dy in self._runs(x, True):
-            if not np.all(np.isfinite(y)) or not np.all(np.isfinite(dy)):
-                return None
+        for (p, y, dy), (at, link_at) in zip(self._runs(x, True), starts, strict=True):
             m = (p.b - p.a) * n_out
-            es.append((self.problem.segments[p.record].targets[p.a:p.b] - y[:, :n_out]).ravel())
-            own = np.arange(p.column, p.column + S) if p.column >= 0 else none
-            rows(np.concatenate([dy[:, :n_out, :P].reshape(m, P), dy[:, :n_out, P:P + len(own)].reshape(m, -1)],
-                                axis=1), np.concatenate([theta_cols, own]))
+            es.append((self._records[p.record].targets[p.a:p.b] - y[:, :n_out]).ravel())
+            block = dy[:, :n_out, :P + (S if p.column >= 0 else 0)]
+            data[at:at + block.size] = block.reshape(m, -1).ravel()
             if p.column >= 0:
                 # continuity: weight * (end of the previous segment - this start), its Jacobian
                 end, dend, column = prev
                 es.append(-self.row_weight * (end - x[p.column:p.column + S]))
-                before = np.arange(column, column + S) if column >= 0 else none
-                rows(np.concatenate([dend[:, :P], dend[:, P:P + len(before)], -np.eye(S)], axis=1)
-                     * self.row_weight[:, None], np.concatenate([theta_cols, before, own]))
+                link = np.concatenate([dend[:, :P + (S if column >= 0 else 0)], -np.eye(S)], axis=1)
+                data[link_at:link_at + link.size] = (link * self.row_weight[:, None]).ravel()
             if S:
                 prev = (y[-1, n_out:], dy[-1, n_out:, :], p.column)
-        widths = np.concatenate(widths)
-        indptr = np.concatenate([[0], np.cumsum(widths)])
-        J = sparse.csr_matrix((np.concatenate(data), np.concatenate(indices), indptr), shape=(len(widths), self.n_x))
+        e = np.concatenate(es)
+        if not (np.all(np.isfinite(e)) and np.all(np.isfinite(data))):
+            return None
+        J = sparse.csr_matrix((data, indices, indptr), shape=(len(indptr) - 1, self.n_x))
         # few segments: J is mostly nonzero, and BLAS on the dense matrix beats sparse products (JᵀJ of 10
         # segments: 1.4 ms dense, 16 ms sparse)
-        return np.concatenate(es), (J.toarray() if P + S >= DENSE_FRACTION * self.n_x else J)
+        return e, (J.toarray() if P + S >= DENSE_FRACTION * self.n_x else J)
+
+    def _pattern(self) -> tuple[list[tuple[int, int]], np.ndarray, np.ndarray]:
+        """fun's CSR pattern: per piece the offsets of its output rows' and continuity rows' values in the
+        data array (-1: none), then the column indices and the row pointers (columns ascending in each row)."""
+        if self._csr is not None:
+            return self._csr
+        n_out, P, S = self.problem.compiled.n_outputs, self.n_theta, len(self.free)
+        theta_cols = np.arange(P)
+        starts, indices, widths, at, before = [], [], [], 0, -1
+        for p in self.pieces:
+            own = np.arange(p.column, p.column + S) if p.column >= 0 else np.zeros(0, dtype=np.int64)
+            m = (p.b - p.a) * n_out
+            cols = np.concatenate([theta_cols, own])
+            indices.append(np.tile(cols, m))
+            widths.append(np.full(m, len(cols)))
+            out_at, at, link_at = at, at + m * len(cols), -1
+            if p.column >= 0:
+                prior = np.arange(before, before + S) if before >= 0 else np.zeros(0, dtype=np.int64)
+                cols = np.concatenate([theta_cols, prior, own])
+                indices.append(np.tile(cols, S))
+                widths.append(np.full(S, len(cols)))
+                link_at, at = at, at + S * len(cols)
+            starts.append((out_at, link_at))
+            before = p.column
+        widths = np.concatenate(widths)
+        indptr = np.concatenate([[0], np.cumsum(widths)]).astype(np.int64)
+        self._csr = (starts, np.concatenate(indices).astype(np.int64), indptr)
+        return self._csr
 
     def output_cost(self, x: np.ndarray) -> float:
         """0.5 * sum of the outputs' squared errors over every segment (the continuity rows left out)."""
         n_out = self.problem.compiled.n_outputs
         total = 0.0
         for p, y, _ in self._runs(np.asarray(x, dtype=float), False):
-            total += 0.5 * float(np.sum((self.problem.segments[p.record].targets[p.a:p.b] - y[:, :n_out]) ** 2))
+            total += 0.5 * float(np.sum((self._records[p.record].targets[p.a:p.b] - y[:, :n_out]) ** 2))
         return total if np.isfinite(total) else float("inf")
 
     def start(self, theta: np.ndarray, carried: dict | None = None) -> np.ndarray:
@@ -275,9 +325,9 @@ class Segmented:
                 x[p.column:p.column + len(self.free)] = carried[key] if carried and key in carried else prev
                 if not (carried and key in carried):  # free measured states start from the data
                     for j, o in self.data_starts:
-                        x[p.column + j] = self.problem.segments[p.record].targets[p.a - 1, o]
+                        x[p.column + j] = self._records[p.record].targets[p.a - 1, o]
             if len(self.free):
-                seg = self.problem.segments[p.record]
+                seg = self._records[p.record]
                 with _interruptible():
                     y = self.problem.compiled.simulate(theta, seg.inputs[p.a:p.b], history=self.history(x, p),
                                                        states=self.free)

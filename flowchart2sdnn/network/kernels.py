@@ -38,7 +38,8 @@ import numpy as np
 
 from .rowops import axpy, emit, padded
 
-__all__ = ["simulate_kernel", "jacobian_kernel", "simulate_step", "rtrl_step", "padded", "ix"]
+__all__ = ["simulate_kernel", "jacobian_kernel", "simulate_pieces_kernel", "jacobian_pieces_kernel", "simulate_step",
+           "rtrl_step", "padded", "ix"]
 
 # Fused multiply-add. No "reassoc": with it LLVM vectorized the sum over a neuron's connections (gathers, from
 # 8 connections on), which changed its rounding with the code around it; the loops over theta need no
@@ -354,3 +355,48 @@ def jacobian_kernel(
             for p in range(n_theta):
                 dy[row, ix(o), ix(p)] = s_buf[slot, r, ix(p)]
     return y, dy
+
+
+# One call for many segments of one record: the per-call Python work (checks, history, dispatch) cost as much
+# as the kernel itself at multiple shooting's 250 segments of 100 samples (benchmarks/bench_shooting_iteration.py).
+@numba.njit(cache=True, fastmath=_FAST, nogil=True)
+def simulate_pieces_kernel(
+    inputs, first, last, histories, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, ring, record,
+    stride
+):
+    """:func:`simulate_kernel` on the samples ``first[i]:last[i]`` of `inputs` (network steps: times `stride`)
+    from ``histories[i]``, for each i; the outputs stacked, shape (sum(last - first), K)."""
+    total = 0
+    for i in range(first.shape[0]):
+        total += last[i] - first[i]
+    out = np.empty((total, record.shape[0]))
+    row = 0
+    for i in range(first.shape[0]):
+        y = simulate_kernel(inputs[first[i] * stride:last[i] * stride], conn_ptr, conn_kind, conn_src, conn_delay,
+                            conn_val, transfer, histories[i], ring, record, stride)
+        out[row:row + y.shape[0]] = y
+        row += y.shape[0]
+    return out
+
+
+@numba.njit(cache=True, fastmath=_FAST, nogil=True)
+def jacobian_pieces_kernel(
+    inputs, first, last, histories, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval,
+    transfer, ring, record, n_theta, stride, s_init
+):
+    """:func:`jacobian_kernel` on the pieces of :func:`simulate_pieces_kernel`, each from ``histories[i]`` with
+    the history's sensitivities `s_init`; outputs and sensitivities stacked."""
+    total = 0
+    for i in range(first.shape[0]):
+        total += last[i] - first[i]
+    y_all = np.empty((total, record.shape[0]))
+    dy_all = np.empty((total, record.shape[0], n_theta))
+    row = 0
+    for i in range(first.shape[0]):
+        y, dy = jacobian_kernel(inputs[first[i] * stride:last[i] * stride], conn_ptr, conn_kind, conn_src,
+                                conn_delay, conn_val, dptr, dtheta, dval, transfer, histories[i], ring, record,
+                                n_theta, stride, s_init)
+        y_all[row:row + y.shape[0]] = y
+        dy_all[row:row + y.shape[0]] = dy
+        row += y.shape[0]
+    return y_all, dy_all

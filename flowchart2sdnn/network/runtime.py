@@ -21,7 +21,7 @@ import numpy as np
 
 from ..expr import Expr, parse_expr
 from .flat import FlatNetwork, flatten, signal_names
-from .kernels import jacobian_kernel, simulate_kernel
+from .kernels import jacobian_kernel, jacobian_pieces_kernel, simulate_kernel, simulate_pieces_kernel
 from .model import Network
 
 __all__ = ["CompiledNetwork", "WeightTable"]
@@ -429,6 +429,45 @@ class CompiledNetwork:
             self.net.substeps,
             s_init,
         )
+
+    def run_pieces(self, theta, inputs: np.ndarray, first, last, histories, states: np.ndarray | None = None,
+                   with_jac: bool = False):
+        """:meth:`simulate` (or with `with_jac` :meth:`jacobian`) of the samples ``first[i]:last[i]`` of
+        `inputs`, each piece from its own ``histories[i]``, stacked row after row: multiple shooting's segments
+        of one record in one kernel call. With `states`, the sensitivities' last S columns are with respect to
+        each piece's ``histories[i][states]``.
+
+        Returns
+        -------
+        yhat : (sum(last - first), n_outputs [+ S]) ndarray
+        dyhat : (sum(last - first), n_outputs [+ S], P [+ S]) ndarray, or None without `with_jac`
+        """
+        u = self._steps(self._check_inputs(inputs))
+        first, last = np.asarray(first, dtype=np.int64), np.asarray(last, dtype=np.int64)
+        if first.shape != last.shape or first.ndim != 1 or np.any(first < 0) or np.any(last <= first) \
+                or np.any(last > u.shape[0] // self.net.substeps):
+            raise ValueError(f"pieces must be 0 <= first < last <= {u.shape[0] // self.net.substeps}, "
+                             f"got first {first} and last {last}")
+        hist = np.ascontiguousarray(histories, dtype=float)
+        if hist.shape != (first.size, self._flat.n_neurons) or not np.all(np.isfinite(hist)):
+            raise ValueError(f"histories must be ({first.size}, {self._flat.n_neurons}) finite values (one row "
+                             f"per piece), got shape {hist.shape}")
+        f = self._flat
+        record = f.output_index
+        if states is not None:
+            states = np.asarray(states, dtype=np.int64)
+            record = np.concatenate([record, states]).astype(np.int64)
+        conn_val, dval = self.connection_values(theta, with_derivatives=with_jac)
+        if not with_jac:
+            return simulate_pieces_kernel(u, first, last, hist, f.conn_ptr, f.conn_kind, f.conn_src, f.conn_delay,
+                                          conn_val, f.transfer, f.ring, record, self.net.substeps), None
+        n_theta = self.n_theta + (0 if states is None else len(states))
+        s_init = np.zeros((f.n_neurons, n_theta))
+        if states is not None:
+            s_init[states, self.n_theta + np.arange(len(states))] = 1.0
+        return jacobian_pieces_kernel(u, first, last, hist, f.conn_ptr, f.conn_kind, f.conn_src, f.conn_delay,
+                                      conn_val, self._dptr, self._dtheta, dval, f.transfer, f.ring, record, n_theta,
+                                      self.net.substeps, s_init)
 
     def signals(
         self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None
