@@ -94,6 +94,16 @@ VARIANTS = {
     "noscale": {"scale": "none"},
     "jac-per-weight": {"scale": "jac", "scale_groups": ()},
     "tau0": {"tau": 0.0},
+    "trainlm-damping": {"damping": "trainlm"},  # mu x0.1 / x10 (the default before Nielsen's schedule)
+    "nielsen": {"damping": "nielsen"},
+    "nielsen-tj": {"damping": "nielsen", "trial_jacobian": True},
+    "nielsen-tj-g75": {"damping": "nielsen", "trial_jacobian": True, "geodesic_rho": 0.75},
+    "nielsen-g75": {"damping": "nielsen", "geodesic_rho": 0.75},
+    "w-nielsen": {"bound_width": 0.01, "damping": "nielsen"},
+    "w-nielsen-tj": {"bound_width": 0.01, "damping": "nielsen", "trial_jacobian": True},
+    "w-nielsen-tj-plain": {"bound_width": 0.01, "damping": "nielsen", "trial_jacobian": True, "geodesic": 0.0},
+    "w-nielsen-tj-skip": {"bound_width": 0.01, "damping": "nielsen", "trial_jacobian": True, "geodesic_skip": 0.2},
+    "nielsen-tj-rescue": {"damping": "nielsen", "trial_jacobian": True, "geodesic_mode": "rescue"},
     "identify": {},  # identify() itself, every default (substeps, shooting auto, curves' start): fit_identify
 }
 FACTOR = 3.0

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = ["IdentifySettings", "SHOOTING", "SHOOTING_STARTS", "IDENTIFY_TAU", "REFIT_TAU", "ONLINE_TAU", "MIN_REL_COST_CHANGE",
-           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "FLOOR_BIAS", "CURVE_START"]
+           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "IDENTIFY_DAMPING", "IDENTIFY_BOUND_WIDTH", "FLOOR_BIAS", "CURVE_START"]
 
 #: First LM damping mu = tau * max diag(JᵀJ) (Madsen-Nielsen-Tingleff) for a fit from a chart's rough `init`:
 #: with trainlm's fixed 1e-3 a single start from the paper's Table 1 reached J1 in 2 of 5 seeds, with this 5/5.
@@ -35,6 +35,16 @@ IDENTIFY_SCALE = "jac"
 #: A learned friction curve's weights and the damping d lie along a narrow curved valley where plain steps are cut
 #: back to a crawl (benchmarks/bench_rough_init.py, learned chart, docs/rough_init.md).
 IDENTIFY_GEODESIC = 0.75
+#: LM moves its damping by Nielsen's rule (fit.damping: mu *= max(1/3, 1 - (2 rho - 1)^3) on an accepted step with gain
+#: ratio rho, x2, x4, ... on refusals in a row) instead of trainlm's x0.1 / x10, which near a minimum swings between a
+#: refused and an accepted mu every iteration (benchmarks/bench_rough_init.py, coulomb: 16 refused trials in 23
+#: iterations with trainlm's, 7 in 21 with Nielsen's).
+IDENTIFY_DAMPING = "nielsen"
+#: A one-sided bound's transform (fit.transforms) bends within this fraction of the start's distance from the
+#: bound, not within one unit of the quantity: with the unit transform a viscous coefficient of 0.024 N·m·s/rad
+#: moved along x = u²/2 and plain steps crawled (coulomb bench: 44-74 iterations against scipy trf's 21
+#: evaluations; with this width plain steps take 25, geodesic ones too).
+IDENTIFY_BOUND_WIDTH = 0.01
 #: An LM iteration that gains less than this fraction of the cost ends the fit: further ones only polish noise.
 MIN_REL_COST_CHANGE = 1e-10
 #: A fit has converged when its last 10 iterations together lowered the cost E by less than this many times
