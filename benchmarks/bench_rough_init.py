@@ -94,16 +94,11 @@ VARIANTS = {
     "noscale": {"scale": "none"},
     "jac-per-weight": {"scale": "jac", "scale_groups": ()},
     "tau0": {"tau": 0.0},
-    "trainlm-damping": {"damping": "trainlm"},  # mu x0.1 / x10 (the default before Nielsen's schedule)
-    "nielsen": {"damping": "nielsen"},
-    "nielsen-tj": {"damping": "nielsen", "trial_jacobian": True},
-    "nielsen-tj-g75": {"damping": "nielsen", "trial_jacobian": True, "geodesic_rho": 0.75},
-    "nielsen-g75": {"damping": "nielsen", "geodesic_rho": 0.75},
-    "w-nielsen": {"bound_width": 0.01, "damping": "nielsen"},
-    "w-nielsen-tj": {"bound_width": 0.01, "damping": "nielsen", "trial_jacobian": True},
-    "w-nielsen-tj-plain": {"bound_width": 0.01, "damping": "nielsen", "trial_jacobian": True, "geodesic": 0.0},
-    "w-nielsen-tj-skip": {"bound_width": 0.01, "damping": "nielsen", "trial_jacobian": True, "geodesic_skip": 0.2},
-    "nielsen-tj-rescue": {"damping": "nielsen", "trial_jacobian": True, "geodesic_mode": "rescue"},
+    # the speed changes (fit.lm's damping, trial_jacobian, bound_width), each undone alone, and all together
+    "trainlm-damping": {"damping": "trainlm"},  # mu x0.1 / x10 (before Nielsen's schedule)
+    "unit-bounds": {"bound_width": 0.0},  # one-sided bounds bend within 1 unit of the quantity (MINUIT's)
+    "residual-trials": {"trial_jacobian": False},  # every trial residual-only, the Jacobian simulated again
+    "before-speed": {"damping": "trainlm", "bound_width": 0.0, "trial_jacobian": False},
     "identify": {},  # identify() itself, every default (substeps, shooting auto, curves' start): fit_identify
 }
 FACTOR = 3.0
