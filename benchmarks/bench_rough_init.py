@@ -99,7 +99,7 @@ VARIANTS = {
     "trainlm-damping": {"damping": "trainlm"},  # mu x0.1 / x10 (before Nielsen's schedule)
     "unit-bounds": {"bound_width": 0.0},  # one-sided bounds bend within 1 unit of the quantity (MINUIT's)
     "residual-trials": {"trial_jacobian": False},  # every trial residual-only, the Jacobian simulated again
-    "before-speed": {"damping": "trainlm", "bound_width": 0.0, "trial_jacobian": False},
+    "before-speed": {"damping": "trainlm", "bound_width": 0.0, "trial_jacobian": False, "geodesic": 0.75},
     "identify": {},  # identify() itself, every default (substeps, shooting auto, curves' start): fit_identify
 }
 FACTOR = 3.0
