@@ -88,7 +88,6 @@ CHARTS = {"learned": ("two_mass", "two_mass_plant"), "coulomb": ("two_mass_coulo
 VARIANTS = {
     "default": {},
     "plain-steps": {"geodesic": 0.0},  # no geodesic acceleration: the default before it
-    "geodesic-steps": {"geodesic": 0.75},  # geodesic steps on any chart (default: only where curves are learned)
     "bend-0.5": {"geodesic": 0.5},  # geodesic acceleration's largest bend (the default's: IDENTIFY_GEODESIC)
     "bend-1.0": {"geodesic": 1.0},
     "random-curves": {"curve_start": "random"},

@@ -61,10 +61,10 @@ __all__ = ["identify"]
               help="Where learned curves without stored weights start: 'stick', for a curve in a feedback loop a "
                    "stick-slip step at 0.3 of the slope the network's step allows, set after brief fits (at most "
                    "150 iterations; docs/rough_init.md); 'random', the chart's seeded init_range weights. Offline fits only.")
-@click.option("--lm-steps", type=click.Choice(["auto", "geodesic", "plain"]), default="auto", show_default=True,
+@click.option("--lm-steps", type=click.Choice(["geodesic", "plain"]), default="geodesic", show_default=True,
               help="LM steps of offline fits: 'geodesic', bent along the cost's valley (geodesic acceleration, one "
                    "extra simulation per step); 'plain', the unbent steps (what a three-mass learned-curve chart "
-                   "needed, docs/rough_init.md); 'auto', geodesic where learned curves are fitted, plain elsewhere.")
+                   "needed, docs/rough_init.md).")
 @click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
               help="Train on this leading fraction of DATA, validate on the rest.")
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
@@ -135,7 +135,7 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
                                     init_window=init_window or 0, shooting=shooting,
                                     shooting_starts=shooting_starts, floor_bias=floor_bias,
                                     curve_start=curve_start, threads=threads,
-                                    lm_steps=lm_steps, lm_geodesic=0.0 if lm_steps == "plain" else IDENTIFY_GEODESIC)
+                                    lm_geodesic=IDENTIFY_GEODESIC if lm_steps == "geodesic" else 0.0)
     progress = Progress(quiet)
     ctrl_c = CtrlC()  # until the files are written: restored when the click context closes
     click.get_current_context().call_on_close(ctrl_c.restore)

@@ -157,7 +157,6 @@ def from_document(doc: dict, chart: Diagram | None = None) -> Identification:
     s = dict(doc["settings"])
     s["fixed_from"] = tuple(s.get("fixed_from", ()))
     s.setdefault("curve_start", "random")  # a result written before the key existed started from random curves
-    s.setdefault("lm_steps", "geodesic")  # ... and before lm_steps, lm_geodesic alone chose the steps
     settings = IdentifySettings(**s)
     fit = doc["fit"]
     ms = doc.get("multistart")

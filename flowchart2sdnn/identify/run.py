@@ -280,18 +280,8 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
     return LMOptions(max_iter=settings.max_iter, min_rel_cost_change=MIN_REL_COST_CHANGE, tau=settings.lm_tau,
                      stall_decrease=settings.converged_decrease / max(1, problem.n_residuals),
                      scale=settings.lm_scale, scale_groups=groups if settings.lm_scale == "jac" else (),
-                     geodesic=settings.lm_geodesic if _geodesic_steps(settings, problem) else 0.0,
-                     damping=IDENTIFY_DAMPING, bound_width=IDENTIFY_BOUND_WIDTH,
+                     geodesic=settings.lm_geodesic, damping=IDENTIFY_DAMPING, bound_width=IDENTIFY_BOUND_WIDTH,
                      trial_jacobian=True)
-
-
-def _geodesic_steps(settings: IdentifySettings, problem: Problem) -> bool:
-    """Whether the fit takes geodesic steps: always for "geodesic", never for "plain", and for "auto" where a
-    learned curve's weights are free (settings.LM_STEPS)."""
-    if settings.lm_steps != "auto":
-        return settings.lm_steps == "geodesic"
-    names = set(problem.names)
-    return any(w.name in names for w in problem.network.free_weights)
 
 
 def _second_look(problem: Problem, x0, lower, upper, settings: IdentifySettings, starts: str, auto, out: _Outcome,

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = ["IdentifySettings", "SHOOTING", "SHOOTING_STARTS", "IDENTIFY_TAU", "REFIT_TAU", "ONLINE_TAU", "MIN_REL_COST_CHANGE",
-           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "LM_STEPS", "IDENTIFY_DAMPING", "IDENTIFY_BOUND_WIDTH", "FLOOR_BIAS", "CURVE_START"]
+           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "IDENTIFY_DAMPING", "IDENTIFY_BOUND_WIDTH", "FLOOR_BIAS", "CURVE_START"]
 
 #: First LM damping mu = tau * max diag(JᵀJ) (Madsen-Nielsen-Tingleff) for a fit from a chart's rough `init`:
 #: with trainlm's fixed 1e-3 a single start from the paper's Table 1 reached J1 in 2 of 5 seeds, with this 5/5.
@@ -35,11 +35,6 @@ IDENTIFY_SCALE = "jac"
 #: A learned friction curve's weights and the damping d lie along a narrow curved valley where plain steps are cut
 #: back to a crawl (benchmarks/bench_rough_init.py, learned chart, docs/rough_init.md).
 IDENTIFY_GEODESIC = 0.75
-#: Which offline fits take geodesic steps: "auto" takes them where the fit has free learned-curve weights (the
-#: valley above) and plain steps elsewhere. On a physical chart, once the bound transform no longer bends the
-#: small coefficients (IDENTIFY_BOUND_WIDTH), the acceleration's extra simulation per trial buys nothing: the
-#: coulomb bench, 8 draws, 25 iterations median either way, 1.94x scipy trf's seconds with it, 1.37x without.
-LM_STEPS = "auto"
 #: LM moves its damping by Nielsen's rule (fit.damping: mu *= max(1/3, 1 - (2 rho - 1)^3) on an accepted step with gain
 #: ratio rho, x2, x4, ... on refusals in a row) instead of trainlm's x0.1 / x10, which near a minimum swings between a
 #: refused and an accepted mu every iteration (benchmarks/bench_rough_init.py, coulomb: 16 refused trials in 23
@@ -111,8 +106,6 @@ class IdentifySettings:
     lm_scale : str           "jac": damping scaled per quantity by the Jacobian's column norms (see
                              :data:`IDENTIFY_SCALE`); "none": trainlm's mu I
     lm_geodesic : float      geodesic acceleration's largest bend (see :data:`IDENTIFY_GEODESIC`); 0: plain steps
-    lm_steps : str           "auto": geodesic steps (bend ``lm_geodesic``) where learned-curve weights are free,
-                             plain steps elsewhere (see :data:`LM_STEPS`); "geodesic": everywhere; "plain": nowhere
     converged_decrease : float  converged when 10 iterations together gain less than this many times E/N
                              (see :data:`CONVERGED_DECREASE`); 0 runs to ``max_iter``
     init_window : int        > 0: the validation record's initial state is fitted on its first init_window
@@ -149,7 +142,6 @@ class IdentifySettings:
     lm_tau: float = IDENTIFY_TAU
     lm_scale: str = IDENTIFY_SCALE
     lm_geodesic: float = IDENTIFY_GEODESIC
-    lm_steps: str = LM_STEPS
     converged_decrease: float = CONVERGED_DECREASE
     init_window: int = 0
     shooting: str | int = SHOOTING
@@ -186,6 +178,4 @@ class IdentifySettings:
               f"curve_start must be 'stick' or 'random', got {self.curve_start!r}")
         _need(self.lm_scale in ("jac", "none"), f"lm_scale must be 'jac' or 'none', got {self.lm_scale!r}")
         _need(0 <= self.lm_geodesic < 2, f"lm_geodesic must be in [0, 2), got {self.lm_geodesic}")
-        _need(self.lm_steps in ("auto", "geodesic", "plain"),
-              f"lm_steps must be 'auto', 'geodesic' or 'plain', got {self.lm_steps!r}")
         _need(self.lm_tau >= 0 and math.isfinite(self.lm_tau), f"lm_tau must be a finite number >= 0, got {self.lm_tau}")
