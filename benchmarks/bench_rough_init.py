@@ -94,11 +94,13 @@ VARIANTS = {
     "noscale": {"scale": "none"},
     "jac-per-weight": {"scale": "jac", "scale_groups": ()},
     "tau0": {"tau": 0.0},
-    # the speed changes (fit.lm's damping, trial_jacobian, bound_width), each undone alone, and all together
+    # the speed changes (fit.lm's damping and trial_jacobian), each undone alone and both
     "trainlm-damping": {"damping": "trainlm"},  # mu x0.1 / x10 (before Nielsen's schedule)
-    "unit-bounds": {"bound_width": 0.0},  # one-sided bounds bend within 1 unit of the quantity (MINUIT's)
+    # one-sided bounds bending within 1 % of the start's distance from the bound (fit.transforms), not 1 unit
+    "scaled-bounds": {"bound_width": 0.01},
+    "scaled-bounds-plain": {"bound_width": 0.01, "geodesic": 0.0},
     "residual-trials": {"trial_jacobian": False},  # every trial residual-only, the Jacobian simulated again
-    "before-speed": {"damping": "trainlm", "bound_width": 0.0, "trial_jacobian": False, "geodesic": 0.75},
+    "before-speed": {"damping": "trainlm", "trial_jacobian": False},
     "identify": {},  # identify() itself, every default (substeps, shooting auto, curves' start): fit_identify
 }
 FACTOR = 3.0

@@ -51,7 +51,7 @@ from .result import (
     OptimizerTrace,
     RecordInfo,
 )
-from .settings import IDENTIFY_BOUND_WIDTH, IDENTIFY_DAMPING, MIN_REL_COST_CHANGE, IdentifySettings
+from .settings import IDENTIFY_DAMPING, MIN_REL_COST_CHANGE, IdentifySettings
 from .shootauto import SUSPECT_PEAK, chaotic_at, choose_shooting, second_look
 from .shooting import kept_stage
 from .workers import fit_start, fit_task, quasi_online_start, run_quasi_online_start, run_start
@@ -280,8 +280,7 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
     return LMOptions(max_iter=settings.max_iter, min_rel_cost_change=MIN_REL_COST_CHANGE, tau=settings.lm_tau,
                      stall_decrease=settings.converged_decrease / max(1, problem.n_residuals),
                      scale=settings.lm_scale, scale_groups=groups if settings.lm_scale == "jac" else (),
-                     geodesic=settings.lm_geodesic, damping=IDENTIFY_DAMPING, bound_width=IDENTIFY_BOUND_WIDTH,
-                     trial_jacobian=True)
+                     geodesic=settings.lm_geodesic, damping=IDENTIFY_DAMPING, trial_jacobian=True)
 
 
 def _second_look(problem: Problem, x0, lower, upper, settings: IdentifySettings, starts: str, auto, out: _Outcome,

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = ["IdentifySettings", "SHOOTING", "SHOOTING_STARTS", "IDENTIFY_TAU", "REFIT_TAU", "ONLINE_TAU", "MIN_REL_COST_CHANGE",
-           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "IDENTIFY_DAMPING", "IDENTIFY_BOUND_WIDTH", "FLOOR_BIAS", "CURVE_START"]
+           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "IDENTIFY_DAMPING", "FLOOR_BIAS", "CURVE_START"]
 
 #: First LM damping mu = tau * max diag(JᵀJ) (Madsen-Nielsen-Tingleff) for a fit from a chart's rough `init`:
 #: with trainlm's fixed 1e-3 a single start from the paper's Table 1 reached J1 in 2 of 5 seeds, with this 5/5.
@@ -40,11 +40,6 @@ IDENTIFY_GEODESIC = 0.75
 #: refused and an accepted mu every iteration (benchmarks/bench_rough_init.py, coulomb: 16 refused trials in 23
 #: iterations with trainlm's, 7 in 21 with Nielsen's).
 IDENTIFY_DAMPING = "nielsen"
-#: A one-sided bound's transform (fit.transforms) bends within this fraction of the start's distance from the
-#: bound, not within one unit of the quantity: with the unit transform a viscous coefficient of 0.024 N·m·s/rad
-#: moved along x = u²/2 and plain steps crawled (coulomb bench: 44-74 iterations against scipy trf's 21
-#: evaluations; with this width plain steps take 25, geodesic ones too).
-IDENTIFY_BOUND_WIDTH = 0.01
 #: An LM iteration that gains less than this fraction of the cost ends the fit: further ones only polish noise.
 MIN_REL_COST_CHANGE = 1e-10
 #: A fit has converged when its last 10 iterations together lowered the cost E by less than this many times
