@@ -15,9 +15,10 @@ min and max    min + (max - min) * (sin(u) + 1) / 2      (max - min) / 2 * cos(u
 A one-sided transform may bend within a width ``w`` other than 1 (:meth:`Bounds.with_width`):
 ``x = min + w * (sqrt((u/w)**2 + 1) - 1)``, straight (``dx/du`` near 1) once ``x - min`` exceeds a few ``w``.
 With ``w = 1`` the bend sits at one *unit* of the quantity, so a friction coefficient of 0.024 N·m·s/rad lives
-deep in the bend (``x`` about ``u**2 / 2``) while a stiffness of 570 N·m/rad does not: the transform's own
-curvature, not the model's, then bends the trainer's path and LM crawls (the coulomb bench:
-benchmarks/bench_rough_init.py). The trainer's ``bound_width`` sets ``w`` from the start values instead.
+deep in the bend (``x`` about ``u**2 / 2``) while a stiffness of 570 N·m/rad does not, and plain LM steps crawl
+along the transform's own curvature (benchmarks/bench_rough_init.py, coulomb chart). The trainer's
+``bound_width`` sets ``w`` from the start values. It is not identify's default: a quantity whose minimum is its
+bound then meets a bend 1/w times sharper there (docs/rough_init.md, "Speed").
 
 The Jacobian of the model with respect to ``u`` follows from the chain rule, ``J_u = J_x * dx/du``.
 At a bound ``dx/du`` is zero, so a quantity that *starts* exactly at a bound could never move;
