@@ -3,6 +3,7 @@ against hand-computed updates, the scaled bound transform against its formula an
 Gauss-Newton step that lands on a linear model's closed-form fit, simulating the first trial with its Jacobian
 (same iterates, fewer simulations), and NIST Misra1a's certified values with all of them."""
 
+import dataclasses
 import math
 
 import nist_misra1a as misra
@@ -94,3 +95,25 @@ def test_bad_speed_options_are_refused():
         LMOptions(damping="marquardt")
     with pytest.raises(ValueError, match="bound_width"):
         LMOptions(bound_width=-1.0)
+
+
+def test_identify_takes_nielsen_steps_only_where_no_learned_curve_is_fitted():
+    """docs/rough_init.md "Speed": with Nielsen's schedule 3 of 12 seed-1 learned-chart fits ran into the limit."""
+    from pathlib import Path
+
+    import flowchart2sdnn as sd
+    from flowchart2sdnn.diagram.validate import load_diagram
+    from flowchart2sdnn.identify.problem import build_problem
+    from flowchart2sdnn.identify.run import lm_options
+    from flowchart2sdnn.identify.settings import IdentifySettings
+
+    root = Path(__file__).resolve().parent.parent
+    record = sd.read_csv(root / "examples" / "data" / "engine_idle.csv")
+    learned = build_problem(load_diagram(root / "diagrams" / "engine.yaml"), record)
+    opts = lm_options(IdentifySettings(), learned)
+    assert (opts.damping, opts.trial_jacobian) == ("trainlm", False)
+    chart = load_diagram(root / "diagrams" / "engine.yaml")
+    fixed = dataclasses.replace(chart, blocks=tuple(dataclasses.replace(b, fixed=True) if b.kind == "nonlinear" else b
+                                                    for b in chart.blocks))
+    opts = lm_options(IdentifySettings(), build_problem(fixed, record))
+    assert (opts.damping, opts.trial_jacobian) == ("nielsen", True)

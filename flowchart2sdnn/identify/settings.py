@@ -38,7 +38,11 @@ IDENTIFY_GEODESIC = 0.75
 #: LM moves its damping by Nielsen's rule (fit.damping: mu *= max(1/3, 1 - (2 rho - 1)^3) on an accepted step with gain
 #: ratio rho, x2, x4, ... on refusals in a row) instead of trainlm's x0.1 / x10, which near a minimum swings between a
 #: refused and an accepted mu every iteration (benchmarks/bench_rough_init.py, coulomb: 16 refused trials in 23
-#: iterations with trainlm's, 7 in 21 with Nielsen's).
+#: iterations with trainlm's, 7 in 21 with Nielsen's), with the first trial of an iteration simulated with its
+#: Jacobian (fit.lm.LMOptions.trial_jacobian; it pays only where refusals are rare). Not where learned curves are
+#: fitted: there trainlm's schedule stays (and residual-only trials). Nielsen's descends further along the learned
+#: chart's valley (seed-1 bench: costs 1.116-1.117 against 1.120-1.121) but then the stall rule does not stop it
+#: within 1000 iterations (3 of 8 draws at the limit against none).
 IDENTIFY_DAMPING = "nielsen"
 #: An LM iteration that gains less than this fraction of the cost ends the fit: further ones only polish noise.
 MIN_REL_COST_CHANGE = 1e-10
