@@ -37,6 +37,7 @@ without learned curves. One run per chart, 26 Nov 2026, load average 2.7-3.8 (do
 | chart, record, seed, draws | Nielsen + first-trial Jacobian: at the minimum, converged, median iterations | before-speed, the same | scipy trf |
 |---|---|---|---|
 | coulomb, 30 s, seed 1, N = 8 (the default) | 8/8, 8/8, 22 (19-36); **1.88×** trf's seconds | 8/8, 8/8, 22 (18-38); 2.31× | 8/8, 21 evaluations (14-25) |
+| three-physical, 10 s, seed 1, N = 6 (the default) | 6/6, 6/6, 37.5 (35-52), 8.7 s | 6/6, 6/6, 47 (23-72), 10.9 s | — |
 | learned, 10 s, seed 2, N = 10 (not the default) | 10/10, 10/10, 178 (172-190) | 10/10, 10/10, 190 (180-714) | — |
 | learned, 10 s, seed 1, N = 12 (not the default) | 12/12, 9/12 (3 at the limit, lower costs), 897 | (draws 0-3) 4/4, 4/4, 749 | — |
 

@@ -117,3 +117,5 @@ def test_identify_takes_nielsen_steps_only_where_no_learned_curve_is_fitted():
                                                     for b in chart.blocks))
     opts = lm_options(IdentifySettings(), build_problem(fixed, record))
     assert (opts.damping, opts.trial_jacobian) == ("nielsen", True)
+    opts = lm_options(IdentifySettings(lm_damping="trainlm"), build_problem(fixed, record))
+    assert (opts.damping, opts.trial_jacobian) == ("trainlm", False)

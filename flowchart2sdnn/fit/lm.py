@@ -8,7 +8,8 @@ The trainer is generic: it sees a callback ``fun(x) -> (e, J)`` returning the re
     (J_u^T J_u + mu I) du = J_u^T e,      J_u = J * dx/du,      cost E = 1/2 e^T e.
 
 A trial step is accepted only if it lowers the cost (then ``mu *= mu_dec``); otherwise ``mu *= mu_inc``
-and the step is recomputed (the schedule of :mod:`.damping`, shared with the quasi-online kernel).  A trial whose simulation diverges (``fun`` returns None, non-finite
+and the step is recomputed (the schedule of :mod:`.damping`, shared with the quasi-online kernel; or Nielsen's,
+``LMOptions.damping``).  A trial whose simulation diverges (``fun`` returns None, non-finite
 values, or raises FloatingPointError/OverflowError) or that ``guard`` refuses is rejected the same way,
 so the result never holds NaN.
 
