@@ -30,6 +30,20 @@ interleaved in the same run, 26 Nov 2026, heavily loaded machine (seconds noisy;
 | learned, 30 s, seed 1, N = 4 | 4/4, 4/4, 888 (888-1095) | 4/4, 0/4 (all at the limit), 1150 | — |
 | learned, 30 s, seed 1, N = 20 (default only) | 20/20, 20/20, 888 (632-1095) | — | — |
 
+The rows above were measured before Nielsen's damping and the first trial with its Jacobian (fit.lm's
+``damping``, ``trial_jacobian``; ``--variant before-speed`` undoes both), identify's default since on charts
+without learned curves. One run per chart, 26 Nov 2026, load average 2.7-3.8 (docs/rough_init.md, "Speed"):
+
+| chart, record, seed, draws | Nielsen + first-trial Jacobian: at the minimum, converged, median iterations | before-speed, the same | scipy trf |
+|---|---|---|---|
+| coulomb, 30 s, seed 1, N = 8 (the default) | 8/8, 8/8, 22 (19-36); **1.88×** trf's seconds | 8/8, 8/8, 22 (18-38); 2.31× | 8/8, 21 evaluations (14-25) |
+| three-physical, 10 s, seed 1, N = 6 (the default) | 6/6, 6/6, 37.5 (35-52), 8.7 s | 6/6, 6/6, 47 (23-72), 10.9 s | — |
+| learned, 10 s, seed 2, N = 10 (not the default) | 10/10, 10/10, 178 (172-190) | 10/10, 10/10, 190 (180-714) | — |
+| learned, 10 s, seed 1, N = 12 (not the default) | 12/12, 9/12 (3 at the limit, lower costs), 897 | (draws 0-3) 4/4, 4/4, 749 | — |
+
+``--variant scaled-bounds-plain`` (one-sided bounds bending within 1 % of the start's distance, plain steps;
+not the default: a quantity whose minimum is its bound crawls there) gave 1.37× trf's seconds on coulomb.
+
 On the learned chart J2 and c end within 0.4 % and 0.1 % of the truth from every draw; d goes to its bound 0 on
 10 s (−86 % on 30 s): it trades against the two learned curves' viscous slopes. Earlier (plain steps): trainlm's
 μI found the coulomb minimum from 2 of 3 draws in 167-668 iterations (μD²: 3/3, 22-27); the learned curves
@@ -94,6 +108,13 @@ VARIANTS = {
     "noscale": {"scale": "none"},
     "jac-per-weight": {"scale": "jac", "scale_groups": ()},
     "tau0": {"tau": 0.0},
+    # the speed changes (fit.lm's damping and trial_jacobian), each undone alone and both
+    "trainlm-damping": {"damping": "trainlm"},  # mu x0.1 / x10 (before Nielsen's schedule)
+    # one-sided bounds bending within 1 % of the start's distance from the bound (fit.transforms), not 1 unit
+    "scaled-bounds": {"bound_width": 0.01},
+    "scaled-bounds-plain": {"bound_width": 0.01, "geodesic": 0.0},
+    "residual-trials": {"trial_jacobian": False},  # every trial residual-only, the Jacobian simulated again
+    "before-speed": {"damping": "trainlm", "trial_jacobian": False},
     "identify": {},  # identify() itself, every default (substeps, shooting auto, curves' start): fit_identify
 }
 FACTOR = 3.0

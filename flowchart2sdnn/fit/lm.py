@@ -8,7 +8,8 @@ The trainer is generic: it sees a callback ``fun(x) -> (e, J)`` returning the re
     (J_u^T J_u + mu I) du = J_u^T e,      J_u = J * dx/du,      cost E = 1/2 e^T e.
 
 A trial step is accepted only if it lowers the cost (then ``mu *= mu_dec``); otherwise ``mu *= mu_inc``
-and the step is recomputed (the schedule of :mod:`.damping`, shared with the quasi-online kernel).  A trial whose simulation diverges (``fun`` returns None, non-finite
+and the step is recomputed (the schedule of :mod:`.damping`, shared with the quasi-online kernel; or Nielsen's,
+``LMOptions.damping``).  A trial whose simulation diverges (``fun`` returns None, non-finite
 values, or raises FloatingPointError/OverflowError) or that ``guard`` refuses is rejected the same way,
 so the result never holds NaN.
 
@@ -28,7 +29,7 @@ import numpy as np
 from scipy import sparse
 from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq
 
-from .damping import TRAINLM_MU0, first_mu, mu_accepted, mu_refused
+from .damping import TRAINLM_MU0, first_mu, mu_accepted, mu_refused, nielsen_accepted, nielsen_refused
 from .transforms import Bounds
 
 __all__ = ["LMOptions", "LMResult", "levenberg_marquardt", "damped_step", "STATUS_MESSAGES", "CONVERGED_STATUSES"]
@@ -76,6 +77,14 @@ class LMOptions:
     ``stall_decrease`` > 0 ends a fit as converged ("small_cost_change") once the cost has fallen by less than that fraction of itself
     over the last ``stall_iterations`` accepted iterations: one iteration's gain says little (a large mu makes
     it small), ten in a row that together gain nothing that matters do.
+
+    ``damping = "nielsen"`` moves mu by the gain ratio rho of each accepted step (actual over predicted decrease):
+    ``mu *= max(1/3, 1 - (2 rho - 1)^3)``, and by 2, 4, 8, ... on refusals in a row (:mod:`.damping`);
+    "trainlm" is ``mu_dec`` / ``mu_inc``. ``trial_jacobian = True`` simulates the first trial of an iteration
+    with its Jacobian (``fun``) instead of ``residual`` alone: accepted, it needs no second simulation; later
+    trials of the iteration (after a refusal) stay residual-only. ``bound_width`` > 0 makes each one-sided
+    bound's transform bend within that fraction of the start's distance from the bound
+    (:meth:`.transforms.Bounds.with_width`); 0 keeps the unit transform.
     """
 
     max_iter: int = 100
@@ -95,6 +104,9 @@ class LMOptions:
     scale: str = "none"
     scale_groups: tuple[int, ...] = ()
     geodesic: float = 0.0
+    damping: str = "trainlm"
+    trial_jacobian: bool = False
+    bound_width: float = 0.0
 
     def __post_init__(self) -> None:
         def need(cond: bool, text: str) -> None:
@@ -128,8 +140,11 @@ class LMOptions:
         need(0 < self.mu_dec < 1, f"`mu_dec` must be in (0, 1), got {self.mu_dec}")
         need(isinstance(self.stall_iterations, int) and self.stall_iterations >= 1,
              f"`stall_iterations` must be an int >= 1, got {self.stall_iterations!r}")
+        need(self.damping in ("trainlm", "nielsen"), f"`damping` must be 'trainlm' or 'nielsen', got {self.damping!r}")
         need(self.scale in ("none", "jac"), f"`scale` must be 'none' or 'jac', got {self.scale!r}")
         need(all(isinstance(g, int) for g in self.scale_groups), "`scale_groups` must be integers, one per quantity")
+        need(math.isfinite(self.bound_width) and self.bound_width >= 0,
+             f"`bound_width` must be a finite number >= 0, got {self.bound_width}")
         need(math.isfinite(self.geodesic) and 0 <= self.geodesic < 2, f"`geodesic` must be in [0, 2), got {self.geodesic}")
         for name in ("min_grad", "cost_goal", "min_rel_step", "min_rel_cost_change", "stall_decrease", "tau"):
             need(getattr(self, name) >= 0, f"`{name}` must be >= 0, got {getattr(self, name)}")
@@ -284,6 +299,39 @@ def _column_norms(J) -> np.ndarray:
     return np.linalg.norm(J / safe, axis=0) * peak
 
 
+class _ScaledColumns:
+    """J·diag(s) as products only: the trainer's per-step work is matrix-vector, and forming J·diag(s) (and its
+    column-scaled copy) cost a pass over the M×P matrix each, more than the products (dense or CSR J)."""
+
+    def __init__(self, J, s: np.ndarray):
+        self.J, self.s = J, s
+
+    def __matmul__(self, v: np.ndarray) -> np.ndarray:
+        return self.J @ (self.s * v)
+
+    @property
+    def T(self) -> _Transposed:
+        return _Transposed(self)
+
+    def dense(self) -> np.ndarray:
+        M = _times_columns(self.J, self.s)
+        return M.toarray() if sparse.issparse(M) else M
+
+
+class _Transposed:
+    def __init__(self, op: _ScaledColumns):
+        self.op = op
+
+    def __matmul__(self, w: np.ndarray) -> np.ndarray:
+        return self.op.s * np.asarray(self.op.J.T @ w).ravel()
+
+
+def _dense(Ju) -> np.ndarray:
+    if isinstance(Ju, _ScaledColumns):
+        return Ju.dense()
+    return Ju.toarray() if sparse.issparse(Ju) else Ju
+
+
 def _call_residual(residual, x, counters) -> np.ndarray | None:
     counters.nfev += 1
     try:
@@ -309,7 +357,7 @@ def damped_step(Ju: np.ndarray, e: np.ndarray, A: np.ndarray, g: np.ndarray, mu:
             return du
     except LinAlgError:
         pass
-    aug = np.vstack([Ju.toarray() if sparse.issparse(Ju) else Ju, math.sqrt(mu) * np.eye(n)])
+    aug = np.vstack([_dense(Ju), math.sqrt(mu) * np.eye(n)])
     rhs = np.concatenate([e, np.zeros(n)])
     return lstsq(aug, rhs, check_finite=False)[0]
 
@@ -377,6 +425,8 @@ def levenberg_marquardt(
     if not isinstance(options, LMOptions):
         raise TypeError(f"`options` must be an LMOptions, got {type(options).__name__}")
     opt = options
+    if opt.bound_width > 0:
+        bounds = bounds.with_width(_widths(bounds, x0, opt.bound_width))
     n_params = x0.size
     counters = _Counters()
 
@@ -412,8 +462,7 @@ def levenberg_marquardt(
             if point.cost <= opt.cost_goal:
                 status = "cost_goal"
                 break
-            Ju = _times_columns(point.J, bounds.dx_du(point.u))
-            g = Ju.T @ point.e  # = -dE/du
+            Ju, A, g = _normal_equations(point, bounds)  # g = Juᵀe = -dE/du
             gnorm = float(np.linalg.norm(g))
             if gnorm < opt.min_grad:
                 status, detail = "min_grad", f"|grad| = {gnorm:.3g}"
@@ -425,13 +474,16 @@ def levenberg_marquardt(
                 status = "mu_max"
                 break
             if opt.scale == "jac":
-                col = _column_scale(Ju, col, opt.scale_groups)
-            status, new_point, mu, tiny = _inner(
-                fun, residual, guard, bounds, point, Ju, g, mu, opt, counters, col
+                col = _column_scale(Ju, col, opt.scale_groups, A)
+            status, new_point, mu, tiny, rho = _inner(
+                fun, residual, guard, bounds, point, Ju, g, mu, opt, counters, col, A
             )
             if new_point is not None:
                 rel_decrease = (point.cost - new_point.cost) / point.cost if point.cost > 0 else 0.0
-                mu = mu_accepted(mu, opt.mu_dec, opt.mu_min)
+                if opt.damping == "nielsen":
+                    mu = nielsen_accepted(mu, rho, opt.mu_min)
+                else:
+                    mu = mu_accepted(mu, opt.mu_dec, opt.mu_min)
                 state = (new_point, mu, costs + (new_point.cost,), mus + (mu,))
                 if tiny:
                     status = "small_step"
@@ -481,11 +533,41 @@ def levenberg_marquardt(
     )
 
 
-def _column_scale(Ju, previous: np.ndarray | None, groups: tuple[int, ...] = ()) -> np.ndarray:
-    """Moré's D: the largest column norm of J_u seen so far (never shrinking, so a quantity that once mattered
-    keeps its damping when its column fades near a bound); 1 for a column that was always zero."""
+def _widths(bounds: Bounds, x0: np.ndarray, fraction: float) -> np.ndarray:
+    """The one-sided transforms' widths: `fraction` of each start's distance from its bound, so that the bend
+    sits at the same relative place whatever the quantity's unit; 1 (the unit transform) for a start on its
+    bound, or a quantity with two bounds or none (their transforms do not use it)."""
+    lo = np.where(np.isfinite(bounds.lower), bounds.lower, np.nan)
+    hi = np.where(np.isfinite(bounds.upper), bounds.upper, np.nan)
+    gap = np.where(np.isfinite(lo), x0 - lo, hi - x0)
+    with np.errstate(invalid="ignore", over="ignore"):
+        w = fraction * np.abs(gap)
+    return np.where(np.isfinite(w) & (w > 0), w, 1.0)
+
+
+def _normal_equations(point: _Point, bounds: Bounds):
+    """(Ju, A, g): J_u = J·diag(dx/du) as products, A = J_uᵀJ_u, g = J_uᵀe, from one JᵀJ and Jᵀe of the point;
+    A is formed from J_u itself (column by column, as before) only where JᵀJ overflows."""
+    s = bounds.dx_du(point.u)
+    Ju = _ScaledColumns(point.J, s)
     with np.errstate(over="ignore", invalid="ignore"):
-        norm = _column_norms(Ju)
+        A = _gram(point.J) * np.outer(s, s)
+        if not np.all(np.isfinite(A)):
+            A = _gram(_times_columns(point.J, s))
+    return Ju, A, Ju.T @ point.e
+
+
+def _column_scale(Ju, previous: np.ndarray | None, groups: tuple[int, ...] = (), A: np.ndarray | None = None
+                  ) -> np.ndarray:
+    """Moré's D: the largest column norm of J_u seen so far (never shrinking, so a quantity that once mattered
+    keeps its damping when its column fades near a bound); 1 for a column that was always zero.
+    With a finite A = J_uᵀJ_u the norms are the roots of its diagonal; otherwise from J_u's columns themselves
+    (divided by their peaks: no overflow of the squares)."""
+    with np.errstate(over="ignore", invalid="ignore"):
+        if A is not None and np.all(np.isfinite(A)):
+            norm = np.sqrt(np.maximum(np.diag(A), 0.0))
+        else:
+            norm = _column_norms(_dense(Ju) if isinstance(Ju, _ScaledColumns) else Ju)
     norm[~np.isfinite(norm)] = 0.0
     if groups:
         if len(groups) != norm.size:
@@ -511,28 +593,31 @@ def _first_mu(point: _Point, bounds: Bounds, opt: LMOptions) -> float:
 
 
 def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float, opt: LMOptions, counters,
-           col: np.ndarray | None = None):
+           col: np.ndarray | None = None, A: np.ndarray | None = None):
     """Raise mu until a trial step lowers the cost (``col``: the column scale D of ``scale="jac"``).
 
-    Returns (status or None, accepted point or None, mu, tiny step flag).
+    Returns (status or None, accepted point or None, mu, tiny step flag, gain ratio of the accepted step).
     """
-    with np.errstate(over="ignore", invalid="ignore"):
-        A = _gram(Ju)
+    if A is None:
+        with np.errstate(over="ignore", invalid="ignore"):
+            A = _gram(_dense(Ju))
     scale = None
     if col is not None and np.all(np.isfinite(A)) and np.all(np.isfinite(g)):
         scale = np.where(col > 0, col, 1.0)
-        Js = _over_columns(Ju, scale)
-        A, gs = _gram(Js), Js.T @ point.e
+        Js = _ScaledColumns(Ju.J, Ju.s / scale) if isinstance(Ju, _ScaledColumns) else _over_columns(Ju, scale)
+        A, gs = A / np.outer(scale, scale), g / scale
     elif not np.all(np.isfinite(A)) or not np.all(np.isfinite(g)):
         # J^T J overflows near a divergence: solve with unit-norm columns instead (Marquardt's scaling), which
         # keeps the step finite; trainlm's plain mu*I is used everywhere else
+        Ju = _dense(Ju)
         with np.errstate(over="ignore", invalid="ignore"):
             scale = _column_norms(Ju)
         scale[~(scale > 0) | ~np.isfinite(scale)] = 1.0
         Js = _over_columns(Ju, scale)
         A, gs = _gram(Js), Js.T @ point.e
     x_norm = float(np.linalg.norm(point.x))
-    for _ in range(opt.max_mu_tries):
+    nu = 2.0  # Nielsen's growth of mu on refusals in a row
+    for tries in range(opt.max_mu_tries):
         if scale is None:
             du = damped_step(Ju, point.e, A, g, mu)
         else:
@@ -543,15 +628,35 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
         u_t = point.u + du
         x_t = bounds.to_external(u_t)
         tiny = float(np.linalg.norm(x_t - point.x)) <= opt.min_rel_step * (opt.min_rel_step + x_norm)
-        trial = _try(fun, residual, guard, u_t, x_t, point.cost, counters)
+        # right after an accepted step a trial is likely accepted too: simulate it with its Jacobian at once
+        # (trial_jacobian) instead of a residual now and the Jacobian's simulation again once accepted
+        cheap = residual if not (opt.trial_jacobian and tries == 0) else None
+        trial = _try(fun, cheap, guard, u_t, x_t, point.cost, counters)
+        if trial is not None and opt.damping == "nielsen":
+            predicted = _predicted_decrease(du, g, Ju)
+            # a model that predicted no decrease where the cost fell (rounding, or a geodesic bend) counts as good
+            rho = (point.cost - trial.cost) / predicted if predicted > 0 and math.isfinite(predicted) else 1.0
+        else:
+            rho = math.nan
         if trial is not None:
-            return None, trial, mu, tiny
+            return None, trial, mu, tiny, rho
         if tiny:  # the cost no longer decreases along steps at rounding level: converged
-            return "small_step", None, mu, tiny
-        mu = mu_refused(mu, opt.mu_inc, math.inf)  # no cap: past mu_max the run stops
+            return "small_step", None, mu, tiny, rho
+        if opt.damping == "nielsen":
+            mu, nu = nielsen_refused(mu, nu, math.inf)
+        else:
+            mu = mu_refused(mu, opt.mu_inc, math.inf)  # no cap: past mu_max the run stops
         if mu > opt.mu_max:
-            return "mu_max", None, mu, tiny
-    return "max_mu_tries", None, mu, False
+            return "mu_max", None, mu, tiny, rho
+    return "max_mu_tries", None, mu, False, math.nan
+
+
+def _predicted_decrease(du: np.ndarray, g: np.ndarray, Ju) -> float:
+    """The decrease of the cost the linear model predicts for the step du: du·g - ½|Ju du|², with g = Juᵀe
+    (positive for a damped step); for a geodesic step, of the step taken."""
+    Jdu = Ju @ du
+    with np.errstate(over="ignore", invalid="ignore"):
+        return float(du @ g) - 0.5 * float(Jdu @ Jdu)
 
 
 GEODESIC_H = 0.1  # the finite-difference step, as a fraction of the step, of the second directional derivative

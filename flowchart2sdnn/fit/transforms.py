@@ -12,6 +12,14 @@ max only       max + 1 - sqrt(u**2 + 1)                  -u / sqrt(u**2 + 1)
 min and max    min + (max - min) * (sin(u) + 1) / 2      (max - min) / 2 * cos(u)
 =============  ========================================  =============================
 
+A one-sided transform may bend within a width ``w`` other than 1 (:meth:`Bounds.with_width`):
+``x = min + w * (sqrt((u/w)**2 + 1) - 1)``, straight (``dx/du`` near 1) once ``x - min`` exceeds a few ``w``.
+With ``w = 1`` the bend sits at one *unit* of the quantity, so a friction coefficient of 0.024 N·m·s/rad lives
+deep in the bend (``x`` about ``u**2 / 2``) while a stiffness of 570 N·m/rad does not, and plain LM steps crawl
+along the transform's own curvature (benchmarks/bench_rough_init.py, coulomb chart). The trainer's
+``bound_width`` sets ``w`` from the start values. It is not identify's default: a quantity whose minimum is its
+bound then meets a bend 1/w times sharper there (docs/rough_init.md, "Speed").
+
 The Jacobian of the model with respect to ``u`` follows from the chain rule, ``J_u = J_x * dx/du``.
 At a bound ``dx/du`` is zero, so a quantity that *starts* exactly at a bound could never move;
 :func:`Bounds.to_internal` therefore accepts such a value, and :meth:`Bounds.start` moves its internal
@@ -62,6 +70,7 @@ class Bounds:
     names: tuple[str, ...]
     lower: np.ndarray
     upper: np.ndarray
+    width: np.ndarray | None = None  # the one-sided transforms' widths w (None: 1 for every quantity)
 
     @classmethod
     def make(cls, names: Sequence[str], lower=None, upper=None) -> Bounds:
@@ -82,6 +91,17 @@ class Bounds:
         lo.setflags(write=False)
         hi.setflags(write=False)
         return cls(names, lo, hi)
+
+    def with_width(self, width) -> Bounds:
+        """These bounds with one-sided transforms of width ``width`` (P,), each finite and > 0."""
+        w = np.array(width, dtype=float).reshape(-1)
+        if w.shape != (len(self.names),) or not np.all(np.isfinite(w) & (w > 0)):
+            raise ValueError(f"`width` must hold {len(self.names)} finite numbers > 0, got {width!r}")
+        w.setflags(write=False)
+        return Bounds(self.names, self.lower, self.upper, w)
+
+    def _w(self, mask: np.ndarray) -> np.ndarray | float:
+        return 1.0 if self.width is None else self.width[mask]
 
     # ------------------------------------------------------------------ masks
     @property
@@ -115,8 +135,9 @@ class Bounds:
         both = has_lo & has_hi
         # sqrt(u^2+1) - 1 written as |u| * (|u| / (hypot(u, 1) + 1)): no cancellation near the bound,
         # never < 0, and no overflow of u^2 for a wild trial step
-        a = np.abs(u)
-        r = a * (a / (np.hypot(a, 1.0) + 1.0))
+        w = np.ones_like(u) if self.width is None else self.width
+        a = np.abs(u) / w
+        r = w * (a * (a / (np.hypot(a, 1.0) + 1.0)))
         x[only_lo] = lo[only_lo] + r[only_lo]
         x[only_hi] = hi[only_hi] - r[only_hi]
         # half-width and centre written so that huge finite bounds do not overflow
@@ -135,10 +156,12 @@ class Bounds:
         only_hi = has_hi & ~has_lo
         both = has_lo & has_hi
         # sqrt((d+1)^2 - 1) = sqrt(d) * sqrt(d + 2): no cancellation for small d, no overflow for large d
-        d = x[only_lo] - lo[only_lo]
-        u[only_lo] = np.sqrt(d) * np.sqrt(d + 2.0)
-        d = hi[only_hi] - x[only_hi]
-        u[only_hi] = np.sqrt(d) * np.sqrt(d + 2.0)
+        w = self._w(only_lo)
+        d = (x[only_lo] - lo[only_lo]) / w
+        u[only_lo] = w * np.sqrt(d) * np.sqrt(d + 2.0)
+        w = self._w(only_hi)
+        d = (hi[only_hi] - x[only_hi]) / w
+        u[only_hi] = w * np.sqrt(d) * np.sqrt(d + 2.0)
         half = 0.5 * hi[both] - 0.5 * lo[both]
         centre = 0.5 * lo[both] + 0.5 * hi[both]
         u[both] = np.arcsin(np.clip((x[both] - centre) / half, -1.0, 1.0))
@@ -152,7 +175,8 @@ class Bounds:
         only_lo = has_lo & ~has_hi
         only_hi = has_hi & ~has_lo
         both = has_lo & has_hi
-        s = u / np.hypot(u, 1.0)
+        a = u if self.width is None else u / self.width
+        s = a / np.hypot(a, 1.0)
         d[only_lo] = s[only_lo]
         d[only_hi] = -s[only_hi]
         d[both] = (0.5 * self.upper[both] - 0.5 * self.lower[both]) * np.cos(u[both])
@@ -167,8 +191,9 @@ class Bounds:
         has_lo, has_hi = self._has_lo, self._has_hi
         one_sided = has_lo ^ has_hi
         both = has_lo & has_hi
-        stuck_one = one_sided & (np.abs(u) < BOUND_NUDGE)
-        u[stuck_one] = BOUND_NUDGE
+        w = np.ones_like(u) if self.width is None else self.width
+        stuck_one = one_sided & (np.abs(u) < BOUND_NUDGE * w)
+        u[stuck_one] = BOUND_NUDGE * w[stuck_one]
         stuck_both = both & (np.abs(np.abs(u) - np.pi / 2) < BOUND_NUDGE)
         u[stuck_both] = np.sign(u[stuck_both]) * (np.pi / 2 - BOUND_NUDGE)
         return u

@@ -51,7 +51,7 @@ from .result import (
     OptimizerTrace,
     RecordInfo,
 )
-from .settings import MIN_REL_COST_CHANGE, IdentifySettings
+from .settings import IDENTIFY_DAMPING, MIN_REL_COST_CHANGE, IdentifySettings
 from .shootauto import SUSPECT_PEAK, chaotic_at, choose_shooting, second_look
 from .shooting import kept_stage
 from .workers import fit_start, fit_task, quasi_online_start, run_quasi_online_start, run_start
@@ -277,10 +277,14 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
     """
     params = {p.name for p in problem.network.parameters}
     groups = tuple(i if n in params else -1 for i, n in enumerate(problem.names))
+    damping = settings.lm_damping
+    if damping == "auto":  # trainlm's where learned curves are fitted (settings.IDENTIFY_DAMPING)
+        names = set(problem.names)
+        damping = "trainlm" if any(w.name in names for w in problem.network.free_weights) else IDENTIFY_DAMPING
     return LMOptions(max_iter=settings.max_iter, min_rel_cost_change=MIN_REL_COST_CHANGE, tau=settings.lm_tau,
                      stall_decrease=settings.converged_decrease / max(1, problem.n_residuals),
                      scale=settings.lm_scale, scale_groups=groups if settings.lm_scale == "jac" else (),
-                     geodesic=settings.lm_geodesic)
+                     geodesic=settings.lm_geodesic, damping=damping, trial_jacobian=damping == "nielsen")
 
 
 def _second_look(problem: Problem, x0, lower, upper, settings: IdentifySettings, starts: str, auto, out: _Outcome,

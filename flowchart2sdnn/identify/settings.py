@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = ["IdentifySettings", "SHOOTING", "SHOOTING_STARTS", "IDENTIFY_TAU", "REFIT_TAU", "ONLINE_TAU", "MIN_REL_COST_CHANGE",
-           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "FLOOR_BIAS", "CURVE_START"]
+           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "IDENTIFY_DAMPING", "LM_DAMPING", "FLOOR_BIAS", "CURVE_START"]
 
 #: First LM damping mu = tau * max diag(JᵀJ) (Madsen-Nielsen-Tingleff) for a fit from a chart's rough `init`:
 #: with trainlm's fixed 1e-3 a single start from the paper's Table 1 reached J1 in 2 of 5 seeds, with this 5/5.
@@ -35,6 +35,20 @@ IDENTIFY_SCALE = "jac"
 #: A learned friction curve's weights and the damping d lie along a narrow curved valley where plain steps are cut
 #: back to a crawl (benchmarks/bench_rough_init.py, learned chart, docs/rough_init.md).
 IDENTIFY_GEODESIC = 0.75
+#: LM moves its damping by Nielsen's rule (fit.damping: mu *= max(1/3, 1 - (2 rho - 1)^3) on an accepted step with gain
+#: ratio rho, x2, x4, ... on refusals in a row) instead of trainlm's x0.1 / x10, which near a minimum swings between a
+#: refused and an accepted mu every iteration (benchmarks/bench_rough_init.py, coulomb: 16 refused trials in 23
+#: iterations with trainlm's, 7 in 21 with Nielsen's), with the first trial of an iteration simulated with its
+#: Jacobian (fit.lm.LMOptions.trial_jacobian; it pays only where refusals are rare). Not where learned curves are
+#: fitted: there trainlm's schedule stays (and residual-only trials). Nielsen's descends further along the learned
+#: chart's valley (seed-1 bench: costs 1.116-1.117 against 1.120-1.121) but then the stall rule does not stop it
+#: within 1000 iterations (3 of 8 draws at the limit against none).
+IDENTIFY_DAMPING = "nielsen"
+#: IdentifySettings.lm_damping's default: "auto" is IDENTIFY_DAMPING where no learned curve is fitted, trainlm's
+#: elsewhere. diagnose's refits keep "trainlm": its brief refits (tens of iterations from next to a fit) and its
+#: benches were measured with it, and with Nielsen's slower cut of mu (/3 at most, not /10) the tanks bench's first
+#: round credited a saturation of u instead of the upper tank's overflow (tests/test_diagnose_overflow.py).
+LM_DAMPING = "auto"
 #: An LM iteration that gains less than this fraction of the cost ends the fit: further ones only polish noise.
 MIN_REL_COST_CHANGE = 1e-10
 #: A fit has converged when its last 10 iterations together lowered the cost E by less than this many times
@@ -96,6 +110,8 @@ class IdentifySettings:
     lm_scale : str           "jac": damping scaled per quantity by the Jacobian's column norms (see
                              :data:`IDENTIFY_SCALE`); "none": trainlm's mu I
     lm_geodesic : float      geodesic acceleration's largest bend (see :data:`IDENTIFY_GEODESIC`); 0: plain steps
+    lm_damping : str         LM's damping schedule: "auto" (see :data:`LM_DAMPING`), "nielsen" (Nielsen's, with the
+                             first trial of each iteration simulated with its Jacobian) or "trainlm" (x0.1 / x10)
     converged_decrease : float  converged when 10 iterations together gain less than this many times E/N
                              (see :data:`CONVERGED_DECREASE`); 0 runs to ``max_iter``
     init_window : int        > 0: the validation record's initial state is fitted on its first init_window
@@ -132,6 +148,7 @@ class IdentifySettings:
     lm_tau: float = IDENTIFY_TAU
     lm_scale: str = IDENTIFY_SCALE
     lm_geodesic: float = IDENTIFY_GEODESIC
+    lm_damping: str = LM_DAMPING
     converged_decrease: float = CONVERGED_DECREASE
     init_window: int = 0
     shooting: str | int = SHOOTING
@@ -168,4 +185,6 @@ class IdentifySettings:
               f"curve_start must be 'stick' or 'random', got {self.curve_start!r}")
         _need(self.lm_scale in ("jac", "none"), f"lm_scale must be 'jac' or 'none', got {self.lm_scale!r}")
         _need(0 <= self.lm_geodesic < 2, f"lm_geodesic must be in [0, 2), got {self.lm_geodesic}")
+        _need(self.lm_damping in ("auto", "nielsen", "trainlm"),
+              f"lm_damping must be 'auto', 'nielsen' or 'trainlm', got {self.lm_damping!r}")
         _need(self.lm_tau >= 0 and math.isfinite(self.lm_tau), f"lm_tau must be a finite number >= 0, got {self.lm_tau}")
