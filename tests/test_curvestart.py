@@ -141,15 +141,15 @@ def test_a_curve_in_no_loop_keeps_the_chart_start(record):
     np.testing.assert_array_equal(x[g], p.compiled.theta0()[g])
 
 
-def test_with_sub_steps_the_step_keeps_the_slope_of_one_step_per_sample(record):
-    # at N sub-steps the chatter limit is 2 J / h = N * 2 J / T (hand-derived as above, h = T / N); the step is
-    # set from the limit of one step per sample, 2 J / T
+def test_with_sub_steps_the_step_is_set_from_the_limit_of_the_network_step(record):
+    # at N sub-steps the chatter limit is 2 J / h = N * 2 J / T (hand-derived as above, h = T / N); the step
+    # starts at the stick fraction of that limit, N times steeper than at one step per sample
     p = problem_of(chart(0.5).replace("substeps: 1", "substeps: 4"), record)
     curves = startable_curves(p)
     assert slope_limit(p, p.compiled.theta0(), "F", curves) == pytest.approx(2 * 0.5 * 4 / T, rel=1e-6)
     x, _ = stick_template(p, p.compiled.theta0(), curves)
     w = dict(zip(p.names, x, strict=True))
-    assert w["F.a1"] * w["F.v1"] == pytest.approx(STICK_FRACTION * 2 * 0.5 / T, rel=1e-6)
+    assert w["F.a1"] * w["F.v1"] == pytest.approx(STICK_FRACTION * 2 * 0.5 * 4 / T, rel=1e-6)
 
 
 def test_identify_reports_the_curves_start_and_random_keeps_the_chart_start(record):
