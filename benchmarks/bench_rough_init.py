@@ -52,12 +52,16 @@ from the chart's random weights (``--variant random-curves``) 0/20 on the 10 s r
 Three-mass drive (``--chart three-physical``: three_mass_physical.yaml on three_mass_stribeck_wide_plant.yaml;
 ``--chart three-learned``: three_mass_learned.yaml on three_mass_stribeck_plant.yaml), ``--variant identify
 --no-trf`` (one `identify()` call with every default: shooting auto, sub-steps auto, the curves' start), 10 s,
-seed 1 (the issue's ≥ 18/20), measured before geodesic acceleration (plain steps; not re-measured):
+seed 1 (the issue's ≥ 18/20). three-physical measured before geodesic acceleration (plain steps; not
+re-measured); three-learned with geodesic steps and the curves' step at 0.3 of the network's own chatter limit
+2J/h (N = 8 here; it was 2J/T, 8× softer, docs/rough_init.md), draws 0-4, 5-12, 13-19 in three runs, two at
+once on the shared 2-core machine (load average 3.5-4: seconds 2-3× a quiet machine's), 26 Nov 2026:
 
 | chart, record, draws | global minimum | costs | converged | iterations, median (range) | s per fit | worst physical error |
 |---|---|---|---|---|---|---|
 | three-physical, 10 s, N = 20 | 20/20 (ref 1.47438) | 1.4744-1.481 | 20/20 | 190 (23-377) | 35.6 (5.6-66.9) | b2 −14.5 % |
-| three-learned, 10 s, N = 7 (cut by the deadline) | 6/7 (ref 1.475) | 1.475-1.805 | 1/7 | 1150 (856-1150; 6 at the limit) | 149 (112-191) | b1 +352 %, b2 −100 % |
+| three-learned, 10 s, N = 20 | 20/20 (ref 1.475) | 1.475-1.484 | 19/20 (draw 9 at the limit) | 318 (156-1150) | 125 (30-233) | the bᵢ (b3 up to +1569 %: traded against the curves' slopes); J, c within 0.1 %, d within 0.6 % |
+| three-learned before the step fix (plain steps), N = 7 | 6/7 (ref 1.475) | 1.475-1.805 | 1/7 | 1150 (856-1150) | 149 (112-191) | b1 +352 %, b2 −100 % |
 
 ``--shooting L`` adds our default LM with multiple shooting (identify.shooting). learned, 10 s, N = 4, seed 1,
 ``--shooting 250`` (stages 250/1000/4000, then single shooting): 0/4 against 1/4 single shooting (costs 1.35-13.2
