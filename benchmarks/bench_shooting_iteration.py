@@ -11,9 +11,9 @@ identify.shooting (`Segmented`, continuity weight 1) at each ``--length`` L, its
 issue asks for at most 1.5 at Q = 25 000), and the seconds of one Jacobian and two residuals (an iteration's
 simulation work without its count of rejected trials, which differs between the runs).
 
-Measured 26 Nov 2026 (load 6, N = 7), each record's segments in one kernel call: L = 100 1.27× (work 1.21×),
-L = 500 1.38× (1.07×), L = 2500 1.20× (1.08×) on one thread; one kernel call per segment before, the same
-load: L = 100 1.61×, L = 500 1.55×.
+Measured 27 Nov 2026 (idle, N = 7, Nielsen's damping: both runs 11 residuals in 5 iterations), each record's
+segments in one kernel call: L = 100 1.28x (work 1.20x; 2 threads 0.99x), L = 500 1.23x (1.09x; 0.92x),
+L = 2500 1.24x (1.11x; 0.86x); one kernel call per segment before (load 6): L = 100 1.61x, L = 500 1.55x.
 
 Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_shooting_iteration.py [--seconds 25] [--length 100 --length
 500 --length 2500] [--iterations 5] [--repeat 3] [--threads 2]``.
