@@ -190,7 +190,7 @@ class Segmented:
         `threads` parts per record."""
         if self._groups is None:
             groups = []
-            for r in range(len(self.problem.segments)):
+            for r in range(len(self._records)):
                 own = [i for i, p in enumerate(self.pieces) if p.record == r]
                 parts = min(self.threads, len(own))
                 groups += [list(a) for a in np.array_split(own, parts) if len(a)]

@@ -342,6 +342,23 @@ class CompiledNetwork:
                              f"got shape {hist.shape}")
         return hist
 
+    def _recorded(self, states) -> np.ndarray:
+        """The neurons a kernel records: the outputs, then `states` (None: none)."""
+        if states is None:
+            return self._flat.output_index
+        return np.concatenate([self._flat.output_index, np.asarray(states, dtype=np.int64)]).astype(np.int64)
+
+    def _state_sensitivities(self, states) -> tuple[int, np.ndarray | None]:
+        """(columns, d history / d (theta, history[states])): theta's P columns, then one per state whose
+        history value is a quantity (identity there); None when there are no states."""
+        if states is None:
+            return self.n_theta, None
+        states = np.asarray(states, dtype=np.int64)
+        n_theta = self.n_theta + len(states)
+        s_init = np.zeros((self._flat.n_neurons, n_theta))
+        s_init[states, self.n_theta + np.arange(len(states))] = 1.0
+        return n_theta, s_init
+
     def _run(self, theta, inputs, init, record: np.ndarray, history=None) -> np.ndarray:
         u = self._steps(self._check_inputs(inputs))
         hist = self._history(init, history, theta)
@@ -372,10 +389,7 @@ class CompiledNetwork:
         -------
         (Q, n_outputs [+ S]) ndarray, possibly non-finite when theta makes the network unstable.
         """
-        record = self._flat.output_index
-        if states is not None:
-            record = np.concatenate([record, np.asarray(states, dtype=np.int64)]).astype(np.int64)
-        return self._run(theta, inputs, init, record, history)
+        return self._run(theta, inputs, init, self._recorded(states), history)
 
     def jacobian(
         self, theta, inputs: np.ndarray, init: Mapping[str, float] | None = None,
@@ -399,13 +413,8 @@ class CompiledNetwork:
         hist = self._history(init, history, theta)
         conn_val, dval = self.connection_values(theta, with_derivatives=True)
         f = self._flat
-        record, n_theta, s_init = f.output_index, self.n_theta, None
-        if states is not None:
-            states = np.asarray(states, dtype=np.int64)
-            record = np.concatenate([f.output_index, states]).astype(np.int64)
-            n_theta = self.n_theta + len(states)
-            s_init = np.zeros((f.n_neurons, n_theta))
-            s_init[states, self.n_theta + np.arange(len(states))] = 1.0
+        record = self._recorded(states)
+        n_theta, s_init = self._state_sensitivities(states)
         if history is None and self._theta_starts:  # d history / d theta: 1 where a state is a parameter
             if s_init is None:
                 s_init = np.zeros((f.n_neurons, n_theta))
@@ -453,18 +462,14 @@ class CompiledNetwork:
             raise ValueError(f"histories must be ({first.size}, {self._flat.n_neurons}) finite values (one row "
                              f"per piece), got shape {hist.shape}")
         f = self._flat
-        record = f.output_index
-        if states is not None:
-            states = np.asarray(states, dtype=np.int64)
-            record = np.concatenate([record, states]).astype(np.int64)
+        record = self._recorded(states)
         conn_val, dval = self.connection_values(theta, with_derivatives=with_jac)
         if not with_jac:
             return simulate_pieces_kernel(u, first, last, hist, f.conn_ptr, f.conn_kind, f.conn_src, f.conn_delay,
                                           conn_val, f.transfer, f.ring, record, self.net.substeps), None
-        n_theta = self.n_theta + (0 if states is None else len(states))
-        s_init = np.zeros((f.n_neurons, n_theta))
-        if states is not None:
-            s_init[states, self.n_theta + np.arange(len(states))] = 1.0
+        n_theta, s_init = self._state_sensitivities(states)
+        if s_init is None:  # the kernel takes one array type: zeros, as a history that depends on nothing
+            s_init = np.zeros((f.n_neurons, n_theta))
         return jacobian_pieces_kernel(u, first, last, hist, f.conn_ptr, f.conn_kind, f.conn_src, f.conn_delay,
                                       conn_val, self._dptr, self._dtheta, dval, f.transfer, f.ring, record, n_theta,
                                       self.net.substeps, s_init)
