@@ -27,11 +27,14 @@ Run from the repository root:
 ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_false_alarms.py [--charts learned|physical] [--plants two,three] [--noise 0.003,0.01,0.03]
 [--n-seeds 3] [--seconds 30] [--max-iter N] [--json OUT.json]`` (one run: 1-30 min on a shared core).
 Measured with ``--charts physical`` (3 seeds x 3 noises x 2 plants) before the geodesic LM trainer: 0 effects
-accepted in 18 runs, 20-600 s a run. With it (f2404f4): 0 accepted in 17 runs, every first fit converged in
-9-50 iterations (two-mass 0.003 seed 2 not run). Learned charts, two-mass, with it: the first fit converges in
+accepted in 18 runs, 20-600 s a run. With it (f2404f4): 0 accepted in 18 runs, every first fit converged in
+9-50 iterations (two-mass 0.003 seed 2 run at 3dc695d). Learned charts, two-mass, with it: the first fit converges in
 490 (0.003 seed 1), 470 (0.01 seed 2) and 112 (0.03 seed 1) iterations, traced, nothing accepted; 0.01 seed 3
 and 0.03 seeds 2-3 stop at 1000, not traced: 0 accepted in 6 runs, 1.5-25 min a run on a loaded core. At
-diagnose's old default of 100 iterations none would have converged, hence the default 1000. Not run: the other learned cells (all of three-mass).
+diagnose's old default of 100 iterations none would have converged, hence the default 1000. Three-mass learned
+chart after the curves' start on sub-steps was fixed (3dc695d): 0 accepted in 9 runs, 7 traced (first fits
+converged in 53-699 iterations), 2 first fits at the 1000 limit. Not run at the current commit: two-mass 0.003
+seeds 2-3, 0.01 seed 1.
 Tables: docs/diagnose.md. The printed first fit gives its LM iterations.
 """
 

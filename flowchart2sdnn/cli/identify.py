@@ -63,8 +63,7 @@ __all__ = ["identify"]
                    "150 iterations; docs/rough_init.md); 'random', the chart's seeded init_range weights. Offline fits only.")
 @click.option("--lm-steps", type=click.Choice(["geodesic", "plain"]), default="geodesic", show_default=True,
               help="LM steps of offline fits: 'geodesic', bent along the cost's valley (geodesic acceleration, one "
-                   "extra simulation per step); 'plain', the unbent steps (what a three-mass learned-curve chart "
-                   "needed, docs/rough_init.md).")
+                   "extra simulation per step); 'plain', the unbent steps (docs/rough_init.md).")
 @click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
               help="Train on this leading fraction of DATA, validate on the rest.")
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
