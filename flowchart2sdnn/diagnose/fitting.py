@@ -56,8 +56,9 @@ class DiagnoseSettings:
     alignment: str = "zoh"
     seed: int = 0
     split: float | None = None
-    # the refit from the chart as given of a candidate that is not neutral (a scanned gap, clip or delay) is
-    # done twice, the second time with a growing horizon: first on the leading `horizon` samples of each
+    # the refit from the chart as given of a candidate that is not neutral (a scanned gap, clip or delay), and of
+    # a neutral one whose plain refit is unpredictable (see unpredictable), is done twice, the second time with a
+    # growing horizon: first on the leading `horizon` samples of each
     # training record, then on 4x longer leading parts, each stage from the last one's fit, up to the whole
     # records (0: off). A drive with backlash is chaotic: from the chart as given a fit of the gap over whole
     # 3 s records stops in a local minimum (backlash bench: validation RMS 0.127, d +5.6 %); 500 samples are
@@ -286,7 +287,7 @@ def unpredictable(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettin
     were: there the growing horizon would only add time, and on EMPS a learned friction curve bent on the first
     0.5 s won over the physical friction terms (docs/diagnose.md).
     """
-    if not math.isfinite(fitted.cost) or fitted.identification.problem is None:
+    if not math.isfinite(fitted.cost) or getattr(fitted.identification, "problem", None) is None:
         return False
     try:
         problem = current_problem(fitted, train, settings)

@@ -8,7 +8,9 @@ One round:
    from the current fit with the effect added at neutral values, and from the chart as given with every
    accepted effect and this one added at neutral values (a refit only from the previous fit gets stuck where
    the previous fit bent its parameters to imitate the missing effect); a candidate that is not neutral (a
-   scanned gap, clip or delay) from the chart as given twice, on the whole records at once and with a growing
+   scanned gap, clip or delay), and a neutral one whose plain refit is unpredictable (fitting.unpredictable:
+   the effect made the drive chaotic, e.g. motor cogging), from the chart as given twice, on the whole records
+   at once and with a growing
    horizon (``horizon`` samples of each record first, then 4x longer leading parts, then the whole records:
    on a chaotic drive a fit over whole records from far away stops in a local minimum) - keeping the lowest
    training cost;
