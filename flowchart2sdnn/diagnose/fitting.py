@@ -284,8 +284,9 @@ def unpredictable(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettin
     the drive chaotic (motor cogging, two-mass bench, 30 s records at 0.01 rad/s: the brief refits of cogging
     p = 6 at w1 grew a moved start 53- to 3e6-fold and ended at 26-97x the noise, validation RMS 0.086 -> 0.097
     on seed 1; with the growing horizon 0.0129, the amplitude within 0.1 %). The gate keeps stable charts as they
-    were: there the growing horizon would only add time, and on EMPS a learned friction curve bent on the first
-    0.5 s won over the physical friction terms (docs/diagnose.md).
+    were: there the growing horizon would only add time, and when it was last measured for every neutral
+    candidate, on EMPS a learned friction curve bent on the first 0.5 s won over the physical terms
+    (docs/diagnose.md).
     """
     if not math.isfinite(fitted.cost) or getattr(fitted.identification, "problem", None) is None:
         return False
