@@ -166,3 +166,8 @@ def test_the_control_gets_the_growing_horizon_when_a_candidate_did(monkeypatch):
     grown_calls.clear()
     loop._control(current, "chart as given", [], [], DiagnoseSettings(horizon=0), 0, [], None, horizon=True)
     assert grown_calls == []
+    # without such a candidate the control's refit from the chart as given grows under the neutral candidates'
+    # rule: when it is unpredictable (fitting.unpredictable), and only from the chart as given
+    monkeypatch.setattr(loop, "unpredictable", lambda fitted, train, settings: True)
+    chaotic = loop._control(current, "chart as given", [], [], settings, 0, [], None)
+    assert grown_calls == [("chart as given", "control_horizon")] and chaotic.start == "control_horizon"

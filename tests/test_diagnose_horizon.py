@@ -16,6 +16,8 @@ from diagnose_bench import chart, record, simulate
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
 from flowchart2sdnn.diagnose.graph import speeds
 from flowchart2sdnn.diagnose.loop import (
+    GROW_ALWAYS,
+    GROW_IF_UNPREDICTABLE,
     DiagnoseSettings,
     Fitted,
     diagnose,
@@ -115,7 +117,7 @@ class _Recording:
         return [fn(u) for u in items]
 
 
-def test_only_candidates_that_are_not_neutral_grow_the_horizon():
+def test_candidates_that_are_not_neutral_always_grow_the_horizon_neutral_ones_when_unpredictable():
     plant = chart("one_mass_dead_time_plant")
     train = record(plant, 2.0, 3, 0.02, **EXCITATION)
     val = record(plant, 1.0, 101, 0.02, **EXCITATION)
@@ -123,6 +125,8 @@ def test_only_candidates_that_are_not_neutral_grow_the_horizon():
     settings = DiagnoseSettings(rounds=1, top=3, refit_iter=5, max_iter=5, alpha=0.999)  # refit both
     effects = [BUILTIN_EFFECTS[n] for n in ("friction", "dead_time")]
     diagnose(chart("one_mass"), train, [val], settings, effects, executor=ex)
-    # a unit: (chart, train, records, settings, max_iter, dof, start, accepted); a delay block marks dead_time
-    grown = {any(b.kind == "delay" for b in u[0].blocks): u[3].horizon for u in ex.units if u[6] == "nominal"}
-    assert grown == {True: settings.horizon, False: 0}
+    # a unit: (chart, train, records, settings, max_iter, dof, start, accepted, grow); a delay block marks
+    # dead_time; a neutral candidate (friction) grows only when its plain refit is unpredictable
+    grown = {any(b.kind == "delay" for b in u[0].blocks): u[8] for u in ex.units if u[6] == "nominal"}
+    assert grown == {True: GROW_ALWAYS, False: GROW_IF_UNPREDICTABLE}
+    assert all(u[3].horizon == settings.horizon for u in ex.units)

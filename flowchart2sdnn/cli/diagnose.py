@@ -78,7 +78,8 @@ def _int_list(text: str) -> tuple[int, ...]:
                  default=1000)  # = DiagnoseSettings.max_iter (not imported here: the CLI starts fast)
 @click.option("--horizon", type=click.IntRange(min=0), default=500, show_default=True,
               help="Samples of the first stage of the growing-horizon refit of a non-neutral candidate (a gap, "
-                   "clip or delay) from the chart as given; 0: off.")
+                   "clip or delay), or of a neutral one whose plain refit is unpredictable (chaotic), from the "
+                   "chart as given; 0: off.")
 @click.option("--top", type=click.IntRange(min=1), default=5, show_default=True,
               help="Places refitted per round (the best option of each).")
 @click.option("--criterion", type=click.Choice(["aic", "bic"]), default="bic", show_default=True,

@@ -20,11 +20,13 @@ from ..identify.initstate import estimate_initial_state
 from ..identify.problem import Problem, build_problem, data_init, metrics
 from ..identify.run import Identification, IdentifySettings, identify
 from ..identify.settings import REFIT_TAU
+from ..identify.shootauto import SUSPECT_PEAK, choose_shooting
+from ..identify.shooting import NOISE_MARGIN, noise_level
 from .effects import Scales
 from .residual import signal_correlation, whiteness
 
 __all__ = ["DiagnoseSettings", "Fitted", "fit_chart", "with_floor", "fit_growing", "horizons", "current_problem", "effect_scales",
-           "residual_analysis", "DEFAULT_SPLIT", "VALIDATION_SEGMENTS", "gain_spread"]
+           "residual_analysis", "DEFAULT_SPLIT", "VALIDATION_SEGMENTS", "gain_spread", "unpredictable"]
 
 DEFAULT_SPLIT = 0.7
 #: The validation records are cut into about this many consecutive parts in all (at least 2 per record): the
@@ -54,8 +56,9 @@ class DiagnoseSettings:
     alignment: str = "zoh"
     seed: int = 0
     split: float | None = None
-    # the refit from the chart as given of a candidate that is not neutral (a scanned gap, clip or delay) is
-    # done twice, the second time with a growing horizon: first on the leading `horizon` samples of each
+    # the refit from the chart as given of a candidate that is not neutral (a scanned gap, clip or delay), and of
+    # a neutral one whose plain refit is unpredictable (see unpredictable), is done twice, the second time with a
+    # growing horizon: first on the leading `horizon` samples of each
     # training record, then on 4x longer leading parts, each stage from the last one's fit, up to the whole
     # records (0: off). A drive with backlash is chaotic: from the chart as given a fit of the gap over whole
     # 3 s records stops in a local minimum (backlash bench: validation RMS 0.127, d +5.6 %); 500 samples are
@@ -268,6 +271,33 @@ def fit_growing(diagram: Diagram, train: list[Dataset], records, settings: Diagn
             break  # diverged on a short stage: continue from where it was
         diagram = ident.diagram
     return fit_chart(diagram, train, records, settings, max_iter, extra_dof, start, None, accepted)
+
+
+def unpredictable(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> bool:
+    """Whether the single-shooting fit `fitted` may have stopped where a growing horizon (:func:`fit_growing`)
+    goes further: its chart amplifies a moved start more than stable charts do (identify.shootauto's probe over
+    the training records, peak above SUSPECT_PEAK) and its training residual is off the noise floor (RMS above
+    NOISE_MARGIN x the noise read off the records' second differences): identify's rule for its second look
+    (identify.shootauto.second_look), applied to a brief refit.
+
+    Why: a neutral effect (zero amplitude) starts on the chart's own trajectory, yet the effect it adds may make
+    the drive chaotic (motor cogging, two-mass bench, 30 s records at 0.01 rad/s: the brief refits of cogging
+    p = 6 at w1 grew a moved start 53- to 3e6-fold and ended at 26-97x the noise, validation RMS 0.086 -> 0.097
+    on seed 1; with the growing horizon 0.0129, the amplitude within 0.1 %). The gate keeps stable charts as they
+    were: there the growing horizon would only add time, and when it was last measured for every neutral
+    candidate, on EMPS a learned friction curve bent on the first 0.5 s won over the physical terms
+    (docs/diagnose.md).
+    """
+    if not math.isfinite(fitted.cost) or getattr(fitted.identification, "problem", None) is None:
+        return False
+    try:
+        problem = current_problem(fitted, train, settings)
+    except (SdnnError, ValueError, KeyError):
+        return False
+    m = sum(s.targets.size for s in problem.segments)
+    if not fitted.cost / max(1, m) > 0.5 * NOISE_MARGIN ** 2 * noise_level(problem):
+        return False
+    return choose_shooting(problem, problem.compiled.theta0()).peak > SUSPECT_PEAK
 
 
 def current_problem(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> Problem:

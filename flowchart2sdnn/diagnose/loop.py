@@ -8,7 +8,9 @@ One round:
    from the current fit with the effect added at neutral values, and from the chart as given with every
    accepted effect and this one added at neutral values (a refit only from the previous fit gets stuck where
    the previous fit bent its parameters to imitate the missing effect); a candidate that is not neutral (a
-   scanned gap, clip or delay) from the chart as given twice, on the whole records at once and with a growing
+   scanned gap, clip or delay), and a neutral one whose plain refit is unpredictable (fitting.unpredictable:
+   the effect made the drive chaotic, e.g. motor cogging), from the chart as given twice, on the whole records
+   at once and with a growing
    horizon (``horizon`` samples of each record first, then 4x longer leading parts, then the whole records:
    on a chaotic drive a fit over whole records from far away stops in a local minimum) - keeping the lowest
    training cost;
@@ -30,7 +32,7 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import dataclass, field
 
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
@@ -51,6 +53,7 @@ from .fitting import (
     gain_spread,
     horizons,
     residual_analysis,
+    unpredictable,
     with_floor,
 )
 from .score import Candidate, Score, Screen, screen
@@ -379,16 +382,25 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
 _HORIZON_STARTS = {"nominal": "horizon", "control_nominal": "control_horizon"}
 
 
+#: when a refit from the chart as given also grows its horizon: always (a candidate that changes the model at
+#: once, or the control of a round that has one), or only when the plain refit is unpredictable (a neutral
+#: candidate: fitting.unpredictable)
+GROW_ALWAYS, GROW_IF_UNPREDICTABLE = "always", "if_unpredictable"
+
+
 def refit_unit(unit: tuple) -> tuple[Fitted | None, float]:
-    """One brief refit: (chart, train, records, settings, max_iter, dof, start, accepted) -> (Fitted or None,
-    seconds). From the chart as given (start "nominal", or the control's "control_nominal") also with a growing
-    horizon (``settings.horizon``), keeping the lower training cost (its start then reads "horizon",
-    "control_horizon"). Module level, so that any executor's worker can run it."""
-    chart, train, records, settings, max_iter, dof, start, acc = unit
+    """One brief refit: (chart, train, records, settings, max_iter, dof, start, accepted[, grow]) -> (Fitted or
+    None, seconds). From the chart as given (start "nominal", or the control's "control_nominal") also with a
+    growing horizon (``settings.horizon``) - always, or with `grow` GROW_IF_UNPREDICTABLE only when the plain
+    refit is unpredictable (:func:`~.fitting.unpredictable`) - keeping the lower training cost (its start then
+    reads "horizon", "control_horizon"). Module level, so that any executor's worker can run it."""
+    chart, train, records, settings, max_iter, dof, start, acc, *rest = unit
+    grow = rest[0] if rest else GROW_ALWAYS
     t0 = time.perf_counter()
     try:
         fitted = fit_chart(chart, train, records, settings, max_iter, dof, start, None, acc)
-        if start in _HORIZON_STARTS and settings.horizon > 0 and not _was_interrupted(fitted):
+        if (start in _HORIZON_STARTS and settings.horizon > 0 and not _was_interrupted(fitted)
+                and (grow == GROW_ALWAYS or unpredictable(fitted, train, settings))):
             grown = fit_growing(chart, train, records, settings, max_iter, dof, _HORIZON_STARTS[start], acc)
             if _was_interrupted(grown) or grown.cost < fitted.cost:
                 fitted = grown
@@ -411,10 +423,9 @@ def _control(current: Fitted, nominal_chart: Diagram, train: list[Dataset], reco
     overflow limit the chart did not need (validation RMS 0.382 -> 0.0030, accepted), while the control without
     that start stayed at 0.382 (false-alarm bench, physical two-mass chart, seed 2; docs/diagnose.md)."""
     acc = tuple(a["effect"] + "@" + a["at"] for a in accepted)
-    plain = replace(settings, horizon=0)
-    from_nominal = settings if horizon else plain
-    units = [(current.diagram, train, records, plain, settings.refit_iter, extra_dof, "control", acc),
-             (nominal_chart, train, records, from_nominal, settings.refit_iter, extra_dof, "control_nominal", acc)]
+    grow = GROW_ALWAYS if horizon else GROW_IF_UNPREDICTABLE
+    units = [(current.diagram, train, records, settings, settings.refit_iter, extra_dof, "control", acc),
+             (nominal_chart, train, records, settings, settings.refit_iter, extra_dof, "control_nominal", acc, grow)]
     results = map(refit_unit, units) if executor is None else executor.map(refit_unit, units)
     best = None
     for fitted, _sec in results:
@@ -450,15 +461,16 @@ def _refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Dataset],
     for i, s in enumerate(best):
         c = s.candidate
         dof = extra_dof + c.effect.extra_dof
-        # the growing horizon only for a candidate that changes the model at once (a scanned gap, clip or
-        # delay): a neutral one starts on the chart as given's own trajectory, and a learned curve bent on the
-        # first 500 samples first ends elsewhere (friction bench: worse; EMPS: the learned curve then wins
-        # over the physical friction terms)
-        unit_settings = settings if not c.neutral else replace(settings, horizon=0)
+        # the growing horizon always for a candidate that changes the model at once (a scanned gap, clip or
+        # delay); for a neutral one, which starts on the chart as given's own trajectory, only where its plain
+        # refit is unpredictable (fitting.unpredictable: motor cogging makes the two-mass drive chaotic). Not
+        # always: a learned curve bent on the first 500 samples first ends elsewhere (EMPS: the learned curve
+        # then wins over the physical friction terms)
+        grow = GROW_IF_UNPREDICTABLE if c.neutral else GROW_ALWAYS
         for start, chart in (("previous", lambda c=c: c.diagram),
                              ("nominal", lambda c=c: c.effect.patch(nominal_chart, c.place, c.option))):
             try:
-                units.append((chart(), train, records, unit_settings, settings.refit_iter, dof, start, acc))
+                units.append((chart(), train, records, settings, settings.refit_iter, dof, start, acc, grow))
             except (SdnnError, ValueError, KeyError):
                 continue
             owner.append(i)
