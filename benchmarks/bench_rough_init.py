@@ -117,6 +117,8 @@ VARIANTS = {
     # one-sided bounds bending within 1 % of the start's distance from the bound (fit.transforms), not 1 unit
     "scaled-bounds": {"bound_width": 0.01},
     "scaled-bounds-plain": {"bound_width": 0.01, "geodesic": 0.0},
+    # bounds without a transform: plain steps in the physical coordinates kept inside the box (fit.boxstep)
+    "box": {"bounds": "box", "geodesic": 0.0},
     "residual-trials": {"trial_jacobian": False},  # every trial residual-only, the Jacobian simulated again
     "before-speed": {"damping": "trainlm", "trial_jacobian": False},
     "identify": {},  # identify() itself, every default (substeps, shooting auto, curves' start): fit_identify

@@ -29,6 +29,7 @@ import numpy as np
 from scipy import sparse
 from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq
 
+from .boxstep import feasible_step
 from .damping import TRAINLM_MU0, first_mu, mu_accepted, mu_refused, nielsen_accepted, nielsen_refused
 from .transforms import Bounds
 
@@ -85,6 +86,12 @@ class LMOptions:
     trials of the iteration (after a refusal) stay residual-only. ``bound_width`` > 0 makes each one-sided
     bound's transform bend within that fraction of the start's distance from the bound
     (:meth:`.transforms.Bounds.with_width`); 0 keeps the unit transform.
+
+    ``bounds = "box"`` handles the bounds without a transform: steps in the physical (column-scaled) coordinates,
+    each component held within 0.995 of its room to the bound it moves towards and the others re-solved around
+    it (:mod:`.boxstep`), every iterate strictly feasible, as bounded trust-region methods do. It needs plain
+    steps (``geodesic = 0``) and the unit transform's width (``bound_width = 0``). "transform" is the change of
+    variables of :mod:`.transforms`.
     """
 
     max_iter: int = 100
@@ -107,6 +114,7 @@ class LMOptions:
     damping: str = "trainlm"
     trial_jacobian: bool = False
     bound_width: float = 0.0
+    bounds: str = "transform"
 
     def __post_init__(self) -> None:
         def need(cond: bool, text: str) -> None:
@@ -146,6 +154,10 @@ class LMOptions:
         need(math.isfinite(self.bound_width) and self.bound_width >= 0,
              f"`bound_width` must be a finite number >= 0, got {self.bound_width}")
         need(math.isfinite(self.geodesic) and 0 <= self.geodesic < 2, f"`geodesic` must be in [0, 2), got {self.geodesic}")
+        need(self.bounds in ("transform", "box"), f"`bounds` must be 'transform' or 'box', got {self.bounds!r}")
+        need(self.bounds == "transform" or (self.geodesic == 0 and self.bound_width == 0),
+             "`bounds='box'` takes plain steps in the physical coordinates: it needs `geodesic` = 0 and "
+             f"`bound_width` = 0, got {self.geodesic} and {self.bound_width}")
         for name in ("min_grad", "cost_goal", "min_rel_step", "min_rel_cost_change", "stall_decrease", "tau"):
             need(getattr(self, name) >= 0, f"`{name}` must be >= 0, got {getattr(self, name)}")
 
@@ -327,7 +339,7 @@ class _Transposed:
 
 
 def _dense(Ju) -> np.ndarray:
-    if isinstance(Ju, _ScaledColumns):
+    if isinstance(Ju, (_ScaledColumns, _Subset)):
         return Ju.dense()
     return Ju.toarray() if sparse.issparse(Ju) else Ju
 
@@ -395,7 +407,8 @@ def levenberg_marquardt(
     names : sequence of str (P,)
         Quantity names for messages.
     lower, upper : array_like (P,), scalar or None
-        Bounds, ``-inf``/``inf``/None for none; enforced by a transform, never by clipping.
+        Bounds, ``-inf``/``inf``/None for none; enforced by a transform, or with ``options.bounds = "box"`` by
+        steps held inside them (:mod:`.boxstep`); never by clipping a step after the fact.
     options : LMOptions
     callback : callable ``callback(iteration, x, cost, mu) -> bool | None``, optional
         Called after each accepted step; returning True stops with status "callback_stop".
@@ -427,6 +440,9 @@ def levenberg_marquardt(
     opt = options
     if opt.bound_width > 0:
         bounds = bounds.with_width(_widths(bounds, x0, opt.bound_width))
+    box = None
+    if opt.bounds == "box":  # the trainer's coordinates are the quantities themselves; the steps keep the box
+        box, bounds = bounds, Bounds.make(names)
     n_params = x0.size
     counters = _Counters()
 
@@ -476,7 +492,7 @@ def levenberg_marquardt(
             if opt.scale == "jac":
                 col = _column_scale(Ju, col, opt.scale_groups, A)
             status, new_point, mu, tiny, rho = _inner(
-                fun, residual, guard, bounds, point, Ju, g, mu, opt, counters, col, A
+                fun, residual, guard, bounds, point, Ju, g, mu, opt, counters, col, A, box
             )
             if new_point is not None:
                 rel_decrease = (point.cost - new_point.cost) / point.cost if point.cost > 0 else 0.0
@@ -593,8 +609,9 @@ def _first_mu(point: _Point, bounds: Bounds, opt: LMOptions) -> float:
 
 
 def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float, opt: LMOptions, counters,
-           col: np.ndarray | None = None, A: np.ndarray | None = None):
-    """Raise mu until a trial step lowers the cost (``col``: the column scale D of ``scale="jac"``).
+           col: np.ndarray | None = None, A: np.ndarray | None = None, box: Bounds | None = None):
+    """Raise mu until a trial step lowers the cost (``col``: the column scale D of ``scale="jac"``; ``box``: the
+    bounds of ``bounds="box"``, the trainer's coordinates then being the quantities themselves).
 
     Returns (status or None, accepted point or None, mu, tiny step flag, gain ratio of the accepted step).
     """
@@ -622,10 +639,16 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
             du = damped_step(Ju, point.e, A, g, mu)
         else:
             du = damped_step(Js, point.e, A, gs, mu) / scale
+        if box is not None:
+            solved = (Ju, A, g, np.ones_like(g)) if scale is None else (Js, A, gs, scale)
+            du = feasible_step(point.x, du, box.lower, box.upper,
+                               lambda held, value, s=solved: _held_step(*s, point.e, mu, held, value))
         if opt.geodesic > 0 and residual is not None:
             du = _accelerated(residual, bounds, point, Ju, Js if scale is not None else Ju, A, scale, du, mu,
                               opt.geodesic, counters)
         u_t = point.u + du
+        if box is not None:  # rounding must not carry x + theta (bound - x) past the bound
+            u_t = np.clip(u_t, box.lower, box.upper)
         x_t = bounds.to_external(u_t)
         tiny = float(np.linalg.norm(x_t - point.x)) <= opt.min_rel_step * (opt.min_rel_step + x_norm)
         # right after an accepted step a trial is likely accepted too: simulate it with its Jacobian at once
@@ -649,6 +672,28 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
         if mu > opt.mu_max:
             return "mu_max", None, mu, tiny, rho
     return "max_mu_tries", None, mu, False, math.nan
+
+
+def _held_step(Js, A, gs, scale, e, mu: float, held: np.ndarray, value: np.ndarray) -> np.ndarray:
+    """The damped step in the quantities' coordinates with the ``held`` components at ``value`` and the others
+    solving (A + mu I)_FF z_F = gs_F - A_FH z_H in the scaled coordinates z = scale * dx of ``A``, ``gs``."""
+    free = ~held
+    z_held = np.where(held, scale * value, 0.0)
+    rhs = gs[free] - A[np.ix_(free, held)] @ z_held[held]
+    z = damped_step(_Subset(Js, free), e - Js @ z_held, A[np.ix_(free, free)], rhs, mu)
+    step = value.copy()
+    step[free] = z / scale[free]
+    return step
+
+
+class _Subset:
+    """Some columns of J (dense, CSR or _ScaledColumns), formed only where damped_step falls back to lstsq."""
+
+    def __init__(self, J, columns: np.ndarray):
+        self.J, self.columns = J, columns
+
+    def dense(self) -> np.ndarray:
+        return _dense(self.J)[:, self.columns]
 
 
 def _predicted_decrease(du: np.ndarray, g: np.ndarray, Ju) -> float:
