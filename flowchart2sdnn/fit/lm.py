@@ -642,7 +642,7 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
         if box is not None:
             solved = (Ju, A, g, np.ones_like(g)) if scale is None else (Js, A, gs, scale)
             du = feasible_step(point.x, du, box.lower, box.upper,
-                               lambda held, value, s=solved: _held_step(*s, point.e, mu, held, value))
+                               lambda held, value, s=solved, m=mu: _held_step(*s, point.e, m, held, value))
         if opt.geodesic > 0 and residual is not None:
             du = _accelerated(residual, bounds, point, Ju, Js if scale is not None else Ju, A, scale, du, mu,
                               opt.geodesic, counters)
