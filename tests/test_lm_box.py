@@ -140,3 +140,14 @@ def test_box_takes_plain_steps_only():
     with pytest.raises(ValueError, match="`bounds` must be"):
         LMOptions(bounds="clip")
     assert math.isclose(BOX_THETA, 0.995)
+
+
+def test_a_sparse_jacobian_takes_the_same_box_steps_as_the_dense_one():
+    """Multiple shooting hands the trainer CSR Jacobians (fit.lm): the held components' re-solve must take them."""
+    from scipy import sparse
+
+    A, b, lower, upper = _linear_problem()
+    dense, _ = _fit(lambda x: (b - A @ x, A), [0.5, 0.02, 1.0, 1.0], lower, upper)
+    csr, _ = _fit(lambda x: (b - A @ x, sparse.csr_matrix(A)), [0.5, 0.02, 1.0, 1.0], lower, upper)
+    np.testing.assert_allclose(csr.cost_history, dense.cost_history, rtol=1e-10)
+    np.testing.assert_allclose(csr.x, dense.x, rtol=1e-10, atol=1e-14)
