@@ -102,25 +102,34 @@ CHARTS = {"learned": ("two_mass", "two_mass_plant"), "coulomb": ("two_mass_coulo
           "three-physical": ("three_mass_physical", "three_mass_stribeck_wide_plant")}
 #: our LM with one change each; "default" is identify's default
 #: ("curve_start": "random" starts the learned curves from the chart's seeded weights, the default before
-#: identify.curvestart; every other key is an LMOptions field)
+#: identify.curvestart; keys "lm_*" are IdentifySettings fields, resolved by identify.run.lm_options as identify
+#: does; every other key is an LMOptions field set after them). On charts without learned curves the default
+#: keeps the bounds without a transform ("box") with a trust radius; the variants that change the geodesic steps,
+#: the transform's width or the damping schedule start from the bound transform ("lm_bounds": "transform"), the
+#: default there before (and still on learned charts).
+T = {"lm_bounds": "transform"}
 VARIANTS = {
     "default": {},
-    "plain-steps": {"geodesic": 0.0},  # no geodesic acceleration: the default before it
-    "bend-0.5": {"geodesic": 0.5},  # geodesic acceleration's largest bend (the default's: IDENTIFY_GEODESIC)
-    "bend-1.0": {"geodesic": 1.0},
+    "transform": T,  # the bound transform, geodesic steps, Nielsen's damping: the default before "box"
+    "plain-steps": {**T, "geodesic": 0.0},  # no geodesic acceleration: the default before it
+    "bend-0.5": {**T, "geodesic": 0.5},  # geodesic acceleration's largest bend (the default's: IDENTIFY_GEODESIC)
+    "bend-1.0": {**T, "geodesic": 1.0},
     "random-curves": {"curve_start": "random"},
     "noscale": {"scale": "none"},
     "jac-per-weight": {"scale": "jac", "scale_groups": ()},
     "tau0": {"tau": 0.0},
     # the speed changes (fit.lm's damping and trial_jacobian), each undone alone and both
-    "trainlm-damping": {"damping": "trainlm"},  # mu x0.1 / x10 (before Nielsen's schedule)
+    "trainlm-damping": {**T, "damping": "trainlm"},  # mu x0.1 / x10 (before Nielsen's schedule)
     # one-sided bounds bending within 1 % of the start's distance from the bound (fit.transforms), not 1 unit
-    "scaled-bounds": {"bound_width": 0.01},
-    "scaled-bounds-plain": {"bound_width": 0.01, "geodesic": 0.0},
-    # bounds without a transform: plain steps in the physical coordinates kept inside the box (fit.boxstep)
-    "box": {"bounds": "box", "geodesic": 0.0},
-    "residual-trials": {"trial_jacobian": False},  # every trial residual-only, the Jacobian simulated again
-    "before-speed": {"damping": "trainlm", "trial_jacobian": False},
+    "scaled-bounds": {**T, "bound_width": 0.01},
+    "scaled-bounds-plain": {**T, "bound_width": 0.01, "geodesic": 0.0},
+    # bounds without a transform (fit.boxstep: plain steps in the physical coordinates kept inside the bounds),
+    # with Nielsen's damping; with a trust radius ("trust", Moré's LM) it is the default on charts without
+    # learned curves (box-trust)
+    "box-nielsen": {"lm_bounds": "box", "lm_damping": "nielsen"},
+    "box-trust": {"lm_bounds": "box", "lm_damping": "trust"},
+    "residual-trials": {**T, "trial_jacobian": False},  # every trial residual-only, the Jacobian simulated again
+    "before-speed": {**T, "damping": "trainlm", "trial_jacobian": False},
     "identify": {},  # identify() itself, every default (substeps, shooting auto, curves' start): fit_identify
 }
 FACTOR = 3.0
@@ -156,7 +165,8 @@ def fit_ours(chart, data, variant: dict, seed: int, shooting: int = 0):
     lo, hi = problem.bounds()
     variant = dict(variant)
     curves = variant.pop("curve_start", IdentifySettings().curve_start)
-    opts = dataclasses.replace(lm_options(IdentifySettings(seed=seed), problem), **variant)
+    settings = {k: variant.pop(k) for k in list(variant) if k.startswith("lm_")}
+    opts = dataclasses.replace(lm_options(IdentifySettings(seed=seed, **settings), problem), **variant)
     t0 = time.perf_counter()
     brief = 0
     if curves == "stick":  # as identify's _offline: the learned curves' step start and brief fit first

@@ -151,3 +151,65 @@ def test_a_sparse_jacobian_takes_the_same_box_steps_as_the_dense_one():
     csr, _ = _fit(lambda x: (b - A @ x, sparse.csr_matrix(A)), [0.5, 0.02, 1.0, 1.0], lower, upper)
     np.testing.assert_allclose(csr.cost_history, dense.cost_history, rtol=1e-10)
     np.testing.assert_allclose(csr.x, dense.x, rtol=1e-10, atol=1e-14)
+
+
+# ------------------------------------------------------------------------------------ the trust-radius damping
+def test_the_damping_for_a_radius_gives_a_step_of_that_length():
+    """Oracle: the step solved directly, (A + mu I)^-1 g by numpy, for the mu the secular equation returned."""
+    from flowchart2sdnn.fit.lm import _mu_for_radius
+
+    rng = np.random.default_rng(5)
+    J = rng.normal(size=(30, 4)) * [1.0, 10.0, 0.1, 1.0]
+    A, g = J.T @ J, J.T @ rng.normal(size=30)
+    gauss_newton = float(np.linalg.norm(np.linalg.solve(A, g)))
+    for radius in (1e-3, 0.1, 0.5 * gauss_newton):
+        mu = _mu_for_radius(A, g, radius)
+        assert mu > 0
+        assert np.linalg.norm(np.linalg.solve(A + mu * np.eye(4), g)) == pytest.approx(radius, rel=1e-9)
+    assert _mu_for_radius(A, g, 2.0 * gauss_newton) == 0.0  # the Gauss-Newton step fits: no damping
+
+
+def test_the_trust_radius_follows_the_gain_ratio():
+    from flowchart2sdnn.fit.lm import trust_accepted
+
+    assert trust_accepted(4.0, 0.1, 2.0) == 0.5  # a poor model: a quarter of the step taken
+    assert trust_accepted(4.0, 0.5, 2.0) == 4.0  # fair: unchanged
+    assert trust_accepted(4.0, 0.9, 3.0) == 6.0  # good: twice the step
+    assert trust_accepted(10.0, 0.9, 3.0) == 10.0  # ... never below the radius it had
+
+
+TRUST = dict(damping="trust")
+
+
+def test_trust_steps_in_the_box_end_at_lsq_linears_minimum():
+    A, b, lower, upper = _linear_problem()
+    ref = lsq_linear(A, b, bounds=(lower, upper), tol=1e-15, method="bvls")
+    r, trials = _fit(lambda x: (b - A @ x, A), [0.5, 0.02, 1.0, 1.0], lower, upper, **TRUST)
+    assert r.converged
+    np.testing.assert_allclose(r.x, ref.x, rtol=1e-6, atol=1e-9)
+    assert np.all(trials >= lower) and np.all(trials <= upper) and np.all(trials[:, :2] > 0.0)
+
+
+@pytest.mark.parametrize("x0", [[1.0, 0.2, 0.5], [5.0, 3.0, 2.0], [0.3, 0.05, 0.01]])
+def test_trust_steps_on_the_decay_end_where_trf_does(x0):
+    t = np.linspace(0.0, 4.0, 60)
+    y = 2.0 * np.exp(-1.3 * t) - 0.2 + 0.005 * np.random.default_rng(1).normal(size=t.size)
+    fun = _decay(t, y)
+    lower, upper = np.zeros(3), np.full(3, np.inf)
+    ref = least_squares(lambda p: fun(p)[0], x0, jac=lambda p: -fun(p)[1], bounds=(lower, upper), method="trf",
+                        x_scale="jac", ftol=1e-15, xtol=1e-15, gtol=1e-15)
+    r, trials = _fit(fun, x0, lower, upper, **TRUST)
+    assert r.converged
+    assert r.cost == pytest.approx(ref.cost, rel=1e-8)
+    np.testing.assert_allclose(r.x[:2], ref.x[:2], rtol=1e-5)
+    assert np.all(trials > lower)
+
+
+def test_trust_steps_give_misra1as_certified_values_and_its_capped_minimum():
+    r, _ = _fit(misra.fun, misra.START_1, [0.0, 0.0], None, **TRUST)
+    np.testing.assert_allclose(r.x, misra.CERTIFIED, rtol=1e-6)
+    lower, upper = np.array([0.0, 0.0]), np.array([200.0, np.inf])
+    ref = least_squares(lambda b: misra.fun(b)[0], [100.0, 1e-4], jac=lambda b: -misra.fun(b)[1],
+                        bounds=(lower, upper), method="trf", x_scale="jac", ftol=1e-15, xtol=1e-15, gtol=1e-15)
+    r, _ = _fit(misra.fun, [100.0, 1e-4], lower, upper, **TRUST)
+    np.testing.assert_allclose(r.x, ref.x, rtol=1e-6)

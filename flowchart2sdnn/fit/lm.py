@@ -81,7 +81,12 @@ class LMOptions:
 
     ``damping = "nielsen"`` moves mu by the gain ratio rho of each accepted step (actual over predicted decrease):
     ``mu *= max(1/3, 1 - (2 rho - 1)^3)``, and by 2, 4, 8, ... on refusals in a row (:mod:`.damping`);
-    "trainlm" is ``mu_dec`` / ``mu_inc``. ``trial_jacobian = True`` simulates the first trial of an iteration
+    "trainlm" is ``mu_dec`` / ``mu_inc``. ``damping = "trust"`` sets each step's length instead (Moré 1978, as
+    MINPACK and scipy's trf): mu is the smallest damping whose scaled step fits a trust radius (0 where the
+    Gauss-Newton step fits), the radius starts at the start's scaled size and becomes a quarter of the step after
+    a refusal or a poor gain ratio (< 0.25), twice the step after a good one (> 0.75); ``mu_history`` then holds
+    the radius. Where mu is small beside JᵀJ, raising it barely shortens the step, so Nielsen's x2, x4, ... take
+    several refused trials to act; the radius acts at once. ``trial_jacobian = True`` simulates the first trial of an iteration
     with its Jacobian (``fun``) instead of ``residual`` alone: accepted, it needs no second simulation; later
     trials of the iteration (after a refusal) stay residual-only. ``bound_width`` > 0 makes each one-sided
     bound's transform bend within that fraction of the start's distance from the bound
@@ -148,7 +153,8 @@ class LMOptions:
         need(0 < self.mu_dec < 1, f"`mu_dec` must be in (0, 1), got {self.mu_dec}")
         need(isinstance(self.stall_iterations, int) and self.stall_iterations >= 1,
              f"`stall_iterations` must be an int >= 1, got {self.stall_iterations!r}")
-        need(self.damping in ("trainlm", "nielsen"), f"`damping` must be 'trainlm' or 'nielsen', got {self.damping!r}")
+        need(self.damping in ("trainlm", "nielsen", "trust"),
+             f"`damping` must be 'trainlm', 'nielsen' or 'trust', got {self.damping!r}")
         need(self.scale in ("none", "jac"), f"`scale` must be 'none' or 'jac', got {self.scale!r}")
         need(all(isinstance(g, int) for g in self.scale_groups), "`scale_groups` must be integers, one per quantity")
         need(math.isfinite(self.bound_width) and self.bound_width >= 0,
@@ -172,7 +178,8 @@ class LMResult:
     cost : float                E = 1/2 e^T e at ``x`` (inf only for "diverged_at_start")
     status, message : str       a key of ``STATUS_MESSAGES`` and a sentence with details
     iterations : int            accepted steps
-    cost_history, mu_history : tuple of float, length iterations + 1 (start value, then after each step)
+    cost_history, mu_history : tuple of float, length iterations + 1 (start value, then after each step; for
+                                ``damping="trust"`` the trust radius)
     jac : ndarray (M, P)        last model Jacobian d yhat / d x at ``x`` (external coordinates; a CSR
                                 matrix when ``fun`` returns sparse Jacobians)
     residual : ndarray (M,)     e = y - yhat at ``x``
@@ -466,7 +473,7 @@ def levenberg_marquardt(
             mu=opt.mu0,
         )
     point = _Point(u, x, first[0], first[1], _cost(first[0]))
-    mu0 = _first_mu(point, bounds, opt)
+    mu0 = _first_mu(point, bounds, opt) if opt.damping != "trust" else math.nan
     # One object holds the whole state so that a KeyboardInterrupt can never leave it half-updated.
     state = (point, mu0, (point.cost,), (mu0,))
     col = None  # the running column norms of "jac" scaling
@@ -486,11 +493,14 @@ def levenberg_marquardt(
             if iteration >= opt.max_iter:
                 status = "max_iter"
                 break
-            if mu > opt.mu_max:
+            if mu > opt.mu_max and opt.damping != "trust":
                 status = "mu_max"
                 break
             if opt.scale == "jac":
                 col = _column_scale(Ju, col, opt.scale_groups, A)
+            if opt.damping == "trust" and not math.isfinite(mu):  # the first radius: the start's scaled size
+                mu = float(np.linalg.norm(point.u * (1.0 if col is None else np.where(col > 0, col, 1.0)))) or 1.0
+                mus = (mu,)
             status, new_point, mu, tiny, rho = _inner(
                 fun, residual, guard, bounds, point, Ju, g, mu, opt, counters, col, A, box
             )
@@ -498,6 +508,8 @@ def levenberg_marquardt(
                 rel_decrease = (point.cost - new_point.cost) / point.cost if point.cost > 0 else 0.0
                 if opt.damping == "nielsen":
                     mu = nielsen_accepted(mu, rho, opt.mu_min)
+                elif opt.damping == "trust":
+                    pass  # _inner moved the radius
                 else:
                     mu = mu_accepted(mu, opt.mu_dec, opt.mu_min)
                 state = (new_point, mu, costs + (new_point.cost,), mus + (mu,))
@@ -634,7 +646,10 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
         A, gs = _gram(Js), Js.T @ point.e
     x_norm = float(np.linalg.norm(point.x))
     nu = 2.0  # Nielsen's growth of mu on refusals in a row
+    radius = mu if opt.damping == "trust" else None
     for tries in range(opt.max_mu_tries):
+        if radius is not None:
+            mu = _mu_for_radius(A, g if scale is None else gs, radius)
         if scale is None:
             du = damped_step(Ju, point.e, A, g, mu)
         else:
@@ -655,16 +670,23 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
         # (trial_jacobian) instead of a residual now and the Jacobian's simulation again once accepted
         cheap = residual if not (opt.trial_jacobian and tries == 0) else None
         trial = _try(fun, cheap, guard, u_t, x_t, point.cost, counters)
-        if trial is not None and opt.damping == "nielsen":
+        if trial is not None and opt.damping in ("nielsen", "trust"):
             predicted = _predicted_decrease(du, g, Ju)
             # a model that predicted no decrease where the cost fell (rounding, or a geodesic bend) counts as good
             rho = (point.cost - trial.cost) / predicted if predicted > 0 and math.isfinite(predicted) else 1.0
         else:
             rho = math.nan
+        step_norm = float(np.linalg.norm(du if scale is None else du * scale))
         if trial is not None:
+            if radius is not None:
+                radius = trust_accepted(radius, rho, step_norm)
+                return None, trial, radius, tiny, rho
             return None, trial, mu, tiny, rho
         if tiny:  # the cost no longer decreases along steps at rounding level: converged
-            return "small_step", None, mu, tiny, rho
+            return "small_step", None, mu if radius is None else radius, tiny, rho
+        if radius is not None:
+            radius = 0.25 * step_norm
+            continue
         if opt.damping == "nielsen":
             mu, nu = nielsen_refused(mu, nu, math.inf)
         else:
@@ -672,6 +694,38 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
         if mu > opt.mu_max:
             return "mu_max", None, mu, tiny, rho
     return "max_mu_tries", None, mu, False, math.nan
+
+
+def trust_accepted(radius: float, rho: float, step_norm: float) -> float:
+    """The trust radius after an accepted step (Moré 1978): a quarter of the step where the model predicted
+    badly, twice the step where it predicted well, unchanged between."""
+    if rho < 0.25:
+        return 0.25 * step_norm
+    if rho > 0.75:
+        return max(radius, 2.0 * step_norm)
+    return radius
+
+
+def _mu_for_radius(A: np.ndarray, g: np.ndarray, radius: float) -> float:
+    """The smallest damping whose step (A + mu I)^-1 g is no longer than ``radius`` (0 where the Gauss-Newton
+    step fits): the secular equation on A's eigenvalues, solved by bisection in log mu."""
+    lam, V = np.linalg.eigh(A)
+    b = V.T @ g
+    lam = np.maximum(lam, 0.0)
+    def length(m):
+        with np.errstate(divide="ignore", invalid="ignore"):
+            return float(np.linalg.norm(b / (lam + m)))
+    if lam.min() > 1e-12 * max(lam.max(), 1e-300) and length(0.0) <= radius:
+        return 0.0
+    hi = max(float(np.linalg.norm(b)) / radius, 1e-300)  # |b| / mu bounds the step's length
+    lo = hi * 1e-20
+    for _ in range(80):
+        mid = math.sqrt(lo * hi)
+        if length(mid) > radius:
+            lo = mid
+        else:
+            hi = mid
+    return hi
 
 
 def _held_step(Js, A, gs, scale, e, mu: float, held: np.ndarray, value: np.ndarray) -> np.ndarray:
