@@ -44,6 +44,21 @@ without learned curves. One run per chart, 26 Nov 2026, load average 2.7-3.8 (do
 ``--variant scaled-bounds-plain`` (one-sided bounds bending within 1 % of the start's distance, plain steps;
 not the default: a quantity whose minimum is its bound crawls there) gave 1.37× trf's seconds on coulomb.
 
+Since 27 Nov identify keeps the bounds of charts without learned curves in the box with a trust radius
+(fit.boxstep, fit.lm damping "trust"; ``--variant transform`` is the default before, ``box-nielsen`` the box with
+Nielsen's damping). One run, coulomb, 30 s, seed 1, N = 8, load from three other benches (docs/rough_init.md,
+"Bounds without a transform"):
+
+| variant | at the minimum, converged, median iterations (range) | s per draw / trf's, median (range) |
+|---|---|---|
+| box-trust (the default) | 8/8, 8/8, 16 (9-22) | **0.88** (0.67-1.55) |
+| box-nielsen | 8/8, 8/8, 24 (17-33) | 1.24 (0.99-2.55) |
+| transform (the default before) | 8/8, 8/8, 22 (19-36) | 1.95 (1.35-4.35) |
+| scipy trf | 8/8, 8/8, 21 evaluations (14-25) | 1 |
+
+three-physical, 10 s, N = 4, ``--no-trf``: box-trust 4/4, 4/4, 12 (11-41), 5.7 s per fit; the transform 4/4, 4/4,
+37 (35-52), 23.3 s.
+
 On the learned chart J2 and c end within 0.4 % and 0.1 % of the truth from every draw; d goes to its bound 0 on
 10 s (−86 % on 30 s): it trades against the two learned curves' viscous slopes. Earlier (plain steps): trainlm's
 μI found the coulomb minimum from 2 of 3 draws in 167-668 iterations (μD²: 3/3, 22-27); the learned curves
