@@ -27,7 +27,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import sparse
-from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq
+from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq, solve_triangular
 
 from .boxstep import feasible_step
 from .damping import TRAINLM_MU0, first_mu, mu_accepted, mu_refused, nielsen_accepted, nielsen_refused
@@ -706,25 +706,53 @@ def trust_accepted(radius: float, rho: float, step_norm: float) -> float:
     return radius
 
 
+#: The trust radius's step length is solved to this fraction of the radius (MINPACK's lmpar takes 0.1).
+RADIUS_TOLERANCE = 1e-6
+
+
 def _mu_for_radius(A: np.ndarray, g: np.ndarray, radius: float) -> float:
-    """The smallest damping whose step (A + mu I)^-1 g is no longer than ``radius`` (0 where the Gauss-Newton
-    step fits): the secular equation on A's eigenvalues, solved by bisection in log mu."""
-    lam, V = np.linalg.eigh(A)
-    b = V.T @ g
-    lam = np.maximum(lam, 0.0)
-    def length(m):
-        with np.errstate(divide="ignore", invalid="ignore"):
-            return float(np.linalg.norm(b / (lam + m)))
-    if lam.min() > 1e-12 * max(lam.max(), 1e-300) and length(0.0) <= radius:
+    """The smallest damping whose step (A + mu I)^-1 g is no longer than ``radius`` (to RADIUS_TOLERANCE of it),
+    0 where the Gauss-Newton step fits: Hebden's Newton iteration on 1/|p(mu)| (Moré 1978, as MINPACK's lmpar),
+    one Cholesky factorization per iteration (no eigen-decomposition: a multiple-shooting fit has hundreds of
+    quantities), kept within the bracket [|g|/radius - trace A, |g|/radius] where the secular function
+    changes sign."""
+    n = A.shape[0]
+    eye = np.eye(n)
+
+    def step(m):
+        try:
+            factor = cho_factor(A + m * eye, check_finite=False)
+        except LinAlgError:
+            return None, None
+        p = cho_solve(factor, g, check_finite=False)
+        if not np.all(np.isfinite(p)):
+            return None, None
+        R, lower = factor
+        q = solve_triangular(R, p, trans="T" if not lower else "N", lower=lower, check_finite=False)
+        return p, q
+
+    p, _ = step(0.0)
+    if p is not None and float(np.linalg.norm(p)) <= radius * (1.0 + RADIUS_TOLERANCE):
         return 0.0
-    hi = max(float(np.linalg.norm(b)) / radius, 1e-300)  # |b| / mu bounds the step's length
-    lo = hi * 1e-20
-    for _ in range(80):
-        mid = math.sqrt(lo * hi)
-        if length(mid) > radius:
-            lo = mid
+    gnorm = float(np.linalg.norm(g))
+    hi = gnorm / radius  # |p(mu)| <= |g| / mu
+    lo = max(0.0, hi - float(np.trace(A)))  # |p(mu)| >= |g| / (mu + largest eigenvalue), which trace(A) bounds
+    mu = hi if lo == 0.0 else math.sqrt(lo * hi)
+    for _ in range(50):
+        p, q = step(mu)
+        if p is None:  # A + mu I not numerically positive definite: mu is too small
+            lo, mu = mu, hi if lo == 0.0 else math.sqrt(mu * hi)
+            continue
+        length = float(np.linalg.norm(p))
+        if abs(length - radius) <= RADIUS_TOLERANCE * radius:
+            return mu
+        if length > radius:
+            lo = mu
         else:
-            hi = mid
+            hi = mu
+        qq = float(q @ q)
+        newton = mu + (length / radius) * (length - radius) * length / qq if qq > 0 else math.nan
+        mu = newton if lo < newton < hi else (0.5 * (lo + hi) if lo > 0 else 0.1 * hi)
     return hi
 
 
