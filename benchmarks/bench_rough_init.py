@@ -56,6 +56,7 @@ Nielsen's damping). One run, coulomb, 30 s, seed 1, N = 8, load from three other
 | transform (the default before) | 8/8, 8/8, 22 (19-36) | 1.95 (1.35-4.35) |
 | scipy trf | 8/8, 8/8, 21 evaluations (14-25) | 1 |
 
+A second run (default against transform and trf): 0.87 (0.56-1.54) against 1.86.
 three-physical, 10 s, N = 4, ``--no-trf``: box-trust 4/4, 4/4, 12 (11-41), 5.7 s per fit; the transform 4/4, 4/4,
 37 (35-52), 23.3 s.
 
