@@ -44,8 +44,9 @@ IDENTIFY_GEODESIC = 0.75
 #: chart's valley (seed-1 bench: costs 1.116-1.117 against 1.120-1.121) but then the stall rule does not stop it
 #: within 1000 iterations (3 of 8 draws at the limit against none).
 IDENTIFY_DAMPING = "nielsen"
-#: IdentifySettings.lm_damping's default: "auto" is IDENTIFY_DAMPING where no learned curve is fitted, trainlm's
-#: elsewhere. diagnose's refits keep "trainlm": its brief refits (tens of iterations from next to a fit) and its
+#: IdentifySettings.lm_damping's default: "auto" is IDENTIFY_DAMPING where no learned curve is fitted and the
+#: bounds are kept by the transform, "trust" (a trust radius) where they are kept in the box (LM_BOUNDS), trainlm's
+#: where learned curves are fitted. diagnose's refits keep "trainlm": its brief refits (tens of iterations from next to a fit) and its
 #: benches were measured with it, and with Nielsen's slower cut of mu (/3 at most, not /10) the tanks bench's first
 #: round credited a saturation of u instead of the upper tank's overflow (tests/test_diagnose_overflow.py).
 LM_DAMPING = "auto"
