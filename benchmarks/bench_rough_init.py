@@ -44,6 +44,22 @@ without learned curves. One run per chart, 26 Nov 2026, load average 2.7-3.8 (do
 ``--variant scaled-bounds-plain`` (one-sided bounds bending within 1 % of the start's distance, plain steps;
 not the default: a quantity whose minimum is its bound crawls there) gave 1.37× trf's seconds on coulomb.
 
+Since 27 Nov identify keeps the bounds of charts without learned curves in the box with a trust radius
+(fit.boxstep, fit.lm damping "trust"; ``--variant transform`` is the default before, ``box-nielsen`` the box with
+Nielsen's damping). One run, coulomb, 30 s, seed 1, N = 8, load from three other benches (docs/rough_init.md,
+"Bounds without a transform"):
+
+| variant | at the minimum, converged, median iterations (range) | s per draw / trf's, median (range) |
+|---|---|---|
+| box-trust (the default) | 8/8, 8/8, 16 (9-22) | **0.88** (0.67-1.55) |
+| box-nielsen | 8/8, 8/8, 24 (17-33) | 1.24 (0.99-2.55) |
+| transform (the default before) | 8/8, 8/8, 22 (19-36) | 1.95 (1.35-4.35) |
+| scipy trf | 8/8, 8/8, 21 evaluations (14-25) | 1 |
+
+A second run (default against transform and trf): 0.87 (0.56-1.54) against 1.86.
+three-physical, 10 s, N = 4, ``--no-trf``: box-trust 4/4, 4/4, 12 (11-41), 5.7 s per fit; the transform 4/4, 4/4,
+37 (35-52), 23.3 s.
+
 On the learned chart J2 and c end within 0.4 % and 0.1 % of the truth from every draw; d goes to its bound 0 on
 10 s (−86 % on 30 s): it trades against the two learned curves' viscous slopes. Earlier (plain steps): trainlm's
 μI found the coulomb minimum from 2 of 3 draws in 167-668 iterations (μD²: 3/3, 22-27); the learned curves
@@ -102,23 +118,34 @@ CHARTS = {"learned": ("two_mass", "two_mass_plant"), "coulomb": ("two_mass_coulo
           "three-physical": ("three_mass_physical", "three_mass_stribeck_wide_plant")}
 #: our LM with one change each; "default" is identify's default
 #: ("curve_start": "random" starts the learned curves from the chart's seeded weights, the default before
-#: identify.curvestart; every other key is an LMOptions field)
+#: identify.curvestart; keys "lm_*" are IdentifySettings fields, resolved by identify.run.lm_options as identify
+#: does; every other key is an LMOptions field set after them). On charts without learned curves the default
+#: keeps the bounds without a transform ("box") with a trust radius; the variants that change the geodesic steps,
+#: the transform's width or the damping schedule start from the bound transform ("lm_bounds": "transform"), the
+#: default there before (and still on learned charts).
+T = {"lm_bounds": "transform"}
 VARIANTS = {
     "default": {},
-    "plain-steps": {"geodesic": 0.0},  # no geodesic acceleration: the default before it
-    "bend-0.5": {"geodesic": 0.5},  # geodesic acceleration's largest bend (the default's: IDENTIFY_GEODESIC)
-    "bend-1.0": {"geodesic": 1.0},
+    "transform": T,  # the bound transform, geodesic steps, Nielsen's damping: the default before "box"
+    "plain-steps": {**T, "geodesic": 0.0},  # no geodesic acceleration: the default before it
+    "bend-0.5": {**T, "geodesic": 0.5},  # geodesic acceleration's largest bend (the default's: IDENTIFY_GEODESIC)
+    "bend-1.0": {**T, "geodesic": 1.0},
     "random-curves": {"curve_start": "random"},
     "noscale": {"scale": "none"},
     "jac-per-weight": {"scale": "jac", "scale_groups": ()},
     "tau0": {"tau": 0.0},
     # the speed changes (fit.lm's damping and trial_jacobian), each undone alone and both
-    "trainlm-damping": {"damping": "trainlm"},  # mu x0.1 / x10 (before Nielsen's schedule)
+    "trainlm-damping": {**T, "damping": "trainlm"},  # mu x0.1 / x10 (before Nielsen's schedule)
     # one-sided bounds bending within 1 % of the start's distance from the bound (fit.transforms), not 1 unit
-    "scaled-bounds": {"bound_width": 0.01},
-    "scaled-bounds-plain": {"bound_width": 0.01, "geodesic": 0.0},
-    "residual-trials": {"trial_jacobian": False},  # every trial residual-only, the Jacobian simulated again
-    "before-speed": {"damping": "trainlm", "trial_jacobian": False},
+    "scaled-bounds": {**T, "bound_width": 0.01},
+    "scaled-bounds-plain": {**T, "bound_width": 0.01, "geodesic": 0.0},
+    # bounds without a transform (fit.boxstep: plain steps in the physical coordinates kept inside the bounds),
+    # with Nielsen's damping; with a trust radius ("trust", Moré's LM) it is the default on charts without
+    # learned curves (box-trust)
+    "box-nielsen": {"lm_bounds": "box", "lm_damping": "nielsen"},
+    "box-trust": {"lm_bounds": "box", "lm_damping": "trust"},
+    "residual-trials": {**T, "trial_jacobian": False},  # every trial residual-only, the Jacobian simulated again
+    "before-speed": {**T, "damping": "trainlm", "trial_jacobian": False},
     "identify": {},  # identify() itself, every default (substeps, shooting auto, curves' start): fit_identify
 }
 FACTOR = 3.0
@@ -154,7 +181,8 @@ def fit_ours(chart, data, variant: dict, seed: int, shooting: int = 0):
     lo, hi = problem.bounds()
     variant = dict(variant)
     curves = variant.pop("curve_start", IdentifySettings().curve_start)
-    opts = dataclasses.replace(lm_options(IdentifySettings(seed=seed), problem), **variant)
+    settings = {k: variant.pop(k) for k in list(variant) if k.startswith("lm_")}
+    opts = dataclasses.replace(lm_options(IdentifySettings(seed=seed, **settings), problem), **variant)
     t0 = time.perf_counter()
     brief = 0
     if curves == "stick":  # as identify's _offline: the learned curves' step start and brief fit first

@@ -14,6 +14,12 @@ simulation work without its count of rejected trials, which differs between the 
 Measured 27 Nov 2026 (idle, N = 7, Nielsen's damping: both runs 11 residuals in 5 iterations), each record's
 segments in one kernel call: L = 100 1.28x (work 1.20x; 2 threads 0.99x), L = 500 1.23x (1.09x; 0.92x),
 L = 2500 1.24x (1.11x; 0.86x); one kernel call per segment before (load 6): L = 100 1.61x, L = 500 1.55x.
+With the bounds in the box and a trust radius (identify's default on this chart since 27 Nov, fit.lm's "trust"
+damping; loaded machine, --repeat 1, the trust radius's mu by eigen-decomposition then): L = 100 1.26x (work
+1.24x; 2 threads 1.08x), L = 500 1.08x (1.10x; 1.00x), L = 2500 1.88x (1.23x; 1.44x): at L = 2500 the segmented
+fit refused 3 trials in 5 iterations where single shooting refused none (9 Jacobians and 3 residuals against 7
+and 1; a refused first trial is simulated with its Jacobian), so its per-iteration ratio counts them; the work
+ratio does not.
 
 Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_shooting_iteration.py [--seconds 25] [--length 100 --length
 500 --length 2500] [--iterations 5] [--repeat 3] [--threads 2]``.

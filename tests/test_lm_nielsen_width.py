@@ -111,11 +111,66 @@ def test_identify_takes_nielsen_steps_only_where_no_learned_curve_is_fitted():
     record = sd.read_csv(root / "examples" / "data" / "engine_idle.csv")
     learned = build_problem(load_diagram(root / "diagrams" / "engine.yaml"), record)
     opts = lm_options(IdentifySettings(), learned)
-    assert (opts.damping, opts.trial_jacobian) == ("trainlm", False)
+    assert (opts.damping, opts.trial_jacobian, opts.bounds, opts.geodesic) == ("trainlm", False, "transform", 0.75)
     chart = load_diagram(root / "diagrams" / "engine.yaml")
     fixed = dataclasses.replace(chart, blocks=tuple(dataclasses.replace(b, fixed=True) if b.kind == "nonlinear" else b
                                                     for b in chart.blocks))
+    # without learned curves the default keeps the bounds in the box with a trust radius (test_lm_box.py);
+    # with the transform, Nielsen's damping
     opts = lm_options(IdentifySettings(), build_problem(fixed, record))
-    assert (opts.damping, opts.trial_jacobian) == ("nielsen", True)
+    assert (opts.damping, opts.trial_jacobian, opts.bounds, opts.geodesic) == ("trust", True, "box", 0.0)
+    opts = lm_options(IdentifySettings(lm_bounds="transform"), build_problem(fixed, record))
+    assert (opts.damping, opts.trial_jacobian, opts.bounds, opts.geodesic) == ("nielsen", True, "transform", 0.75)
     opts = lm_options(IdentifySettings(lm_damping="trainlm"), build_problem(fixed, record))
     assert (opts.damping, opts.trial_jacobian) == ("trainlm", False)
+
+
+def test_result_files_record_how_lm_kept_the_bounds_and_older_ones_read_as_the_transform():
+    """RESULT.json's settings carry lm_bounds as lm_damping is carried; a file written before the key existed was
+    fitted with the bound transform and reads back so (identify.document)."""
+    import json
+    from pathlib import Path
+
+    import flowchart2sdnn as sd
+    from flowchart2sdnn.diagram.validate import load_diagram
+    from flowchart2sdnn.identify.document import dumps, from_document, to_document
+
+    root = Path(__file__).resolve().parent.parent
+    chart = load_diagram(root / "diagrams" / "engine.yaml")
+    fixed = dataclasses.replace(chart, blocks=tuple(dataclasses.replace(b, fixed=True) if b.kind == "nonlinear" else b
+                                                    for b in chart.blocks))
+    record = sd.read_csv(root / "examples" / "data" / "engine_idle.csv")
+    out = sd.identify(fixed, record, max_iter=5, floor_bias=False, lm_bounds="box")
+    doc = json.loads(dumps(to_document(out)))
+    assert doc["settings"]["lm_bounds"] == "box"
+    assert from_document(doc).settings.lm_bounds == "box"
+    del doc["settings"]["lm_bounds"]
+    assert from_document(doc).settings.lm_bounds == "transform"
+    with pytest.raises(ValueError, match="lm_bounds"):
+        sd.identify(fixed, record, lm_bounds="clip")
+
+
+def test_identify_cli_takes_the_bounds_handling(tmp_path):
+    """`--lm-bounds box` is the library's lm_bounds = "box" (the same fit), recorded in RESULT.json; a wrong word
+    is a usage error."""
+    import json
+    from pathlib import Path
+
+    from click.testing import CliRunner
+
+    import flowchart2sdnn as sd
+    from flowchart2sdnn.cli import main
+
+    root = Path(__file__).resolve().parent.parent
+    chart, csv = root / "diagrams" / "engine.yaml", root / "examples" / "data" / "engine_idle.csv"
+    out = tmp_path / "box.json"
+    common = ["--max-iter", "5", "--curve-start", "random", "--no-floor-bias", "--quiet"]
+    res = CliRunner().invoke(main, ["identify", str(csv), "--diagram", str(chart), *common, "--lm-bounds", "box",
+                                    "-o", str(out)])
+    assert res.exit_code == 0, res.output
+    doc = json.loads(out.read_text())
+    assert doc["settings"]["lm_bounds"] == "box"
+    lib = sd.identify(chart, sd.read_csv(csv), max_iter=5, curve_start="random", floor_bias=False, lm_bounds="box")
+    assert doc["parameters"]["J1"]["value"] == lib.parameters["J1"].value
+    bad = CliRunner().invoke(main, ["identify", str(csv), "--diagram", str(chart), "--lm-bounds", "clip"])
+    assert bad.exit_code == 2

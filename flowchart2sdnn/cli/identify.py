@@ -63,7 +63,13 @@ __all__ = ["identify"]
                    "150 iterations; docs/rough_init.md); 'random', the chart's seeded init_range weights. Offline fits only.")
 @click.option("--lm-steps", type=click.Choice(["geodesic", "plain"]), default="geodesic", show_default=True,
               help="LM steps of offline fits: 'geodesic', bent along the cost's valley (geodesic acceleration, one "
-                   "extra simulation per step); 'plain', the unbent steps (docs/rough_init.md).")
+                   "extra simulation per step); 'plain', the unbent steps (docs/rough_init.md). Used where the "
+                   "bounds are kept by the transform (--lm-bounds).")
+@click.option("--lm-bounds", type=click.Choice(["auto", "transform", "box"]), default="auto", show_default=True,
+              help="How offline fits keep the parameters' bounds: 'box', plain steps in the physical quantities "
+                   "held inside them, each step's length set by a trust radius (as scipy's trf); 'transform', a "
+                   "change of variables with --lm-steps; 'auto', box where no learned curve is fitted, the "
+                   "transform elsewhere (docs/rough_init.md).")
 @click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
               help="Train on this leading fraction of DATA, validate on the rest.")
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
@@ -90,7 +96,7 @@ __all__ = ["identify"]
 @click.option("--quiet", is_flag=True, help="No progress and no table.")
 @executor_options("the multi-start fits")
 @handle_errors
-def identify(data, chart, output, fix_from, validation, init_window, shooting, shooting_starts, threads, floor_bias, curve_start, lm_steps, split, starts, seed, online, window, average,
+def identify(data, chart, output, fix_from, validation, init_window, shooting, shooting_starts, threads, floor_bias, curve_start, lm_steps, lm_bounds, split, starts, seed, online, window, average,
              max_iter, alignment, substeps, mapping, units, plots, html_path, force, quiet, workers=None,
              scheduler=None) -> None:
     """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
@@ -134,7 +140,8 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
                                     init_window=init_window or 0, shooting=shooting,
                                     shooting_starts=shooting_starts, floor_bias=floor_bias,
                                     curve_start=curve_start, threads=threads,
-                                    lm_geodesic=IDENTIFY_GEODESIC if lm_steps == "geodesic" else 0.0)
+                                    lm_geodesic=IDENTIFY_GEODESIC if lm_steps == "geodesic" else 0.0,
+                                    lm_bounds=lm_bounds)
     progress = Progress(quiet)
     ctrl_c = CtrlC()  # until the files are written: restored when the click context closes
     click.get_current_context().call_on_close(ctrl_c.restore)

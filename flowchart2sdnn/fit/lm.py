@@ -27,8 +27,9 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy import sparse
-from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq
+from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq, solve_triangular
 
+from .boxstep import feasible_step
 from .damping import TRAINLM_MU0, first_mu, mu_accepted, mu_refused, nielsen_accepted, nielsen_refused
 from .transforms import Bounds
 
@@ -80,11 +81,22 @@ class LMOptions:
 
     ``damping = "nielsen"`` moves mu by the gain ratio rho of each accepted step (actual over predicted decrease):
     ``mu *= max(1/3, 1 - (2 rho - 1)^3)``, and by 2, 4, 8, ... on refusals in a row (:mod:`.damping`);
-    "trainlm" is ``mu_dec`` / ``mu_inc``. ``trial_jacobian = True`` simulates the first trial of an iteration
+    "trainlm" is ``mu_dec`` / ``mu_inc``. ``damping = "trust"`` sets each step's length instead (Moré 1978, as
+    MINPACK and scipy's trf): mu is the smallest damping whose scaled step fits a trust radius (0 where the
+    Gauss-Newton step fits), the radius starts at the start's scaled size and becomes a quarter of the step after
+    a refusal or a poor gain ratio (< 0.25), twice the step after a good one (> 0.75); ``mu_history`` then holds
+    the radius. Where mu is small beside JᵀJ, raising it barely shortens the step, so Nielsen's x2, x4, ... take
+    several refused trials to act; the radius acts at once. ``trial_jacobian = True`` simulates the first trial of an iteration
     with its Jacobian (``fun``) instead of ``residual`` alone: accepted, it needs no second simulation; later
     trials of the iteration (after a refusal) stay residual-only. ``bound_width`` > 0 makes each one-sided
     bound's transform bend within that fraction of the start's distance from the bound
     (:meth:`.transforms.Bounds.with_width`); 0 keeps the unit transform.
+
+    ``bounds = "box"`` handles the bounds without a transform: steps in the physical (column-scaled) coordinates,
+    each component held within 0.995 of its room to the bound it moves towards and the others re-solved around
+    it (:mod:`.boxstep`), every iterate strictly feasible, as bounded trust-region methods do. It needs plain
+    steps (``geodesic = 0``) and the unit transform's width (``bound_width = 0``). "transform" is the change of
+    variables of :mod:`.transforms`.
     """
 
     max_iter: int = 100
@@ -107,6 +119,7 @@ class LMOptions:
     damping: str = "trainlm"
     trial_jacobian: bool = False
     bound_width: float = 0.0
+    bounds: str = "transform"
 
     def __post_init__(self) -> None:
         def need(cond: bool, text: str) -> None:
@@ -140,12 +153,17 @@ class LMOptions:
         need(0 < self.mu_dec < 1, f"`mu_dec` must be in (0, 1), got {self.mu_dec}")
         need(isinstance(self.stall_iterations, int) and self.stall_iterations >= 1,
              f"`stall_iterations` must be an int >= 1, got {self.stall_iterations!r}")
-        need(self.damping in ("trainlm", "nielsen"), f"`damping` must be 'trainlm' or 'nielsen', got {self.damping!r}")
+        need(self.damping in ("trainlm", "nielsen", "trust"),
+             f"`damping` must be 'trainlm', 'nielsen' or 'trust', got {self.damping!r}")
         need(self.scale in ("none", "jac"), f"`scale` must be 'none' or 'jac', got {self.scale!r}")
         need(all(isinstance(g, int) for g in self.scale_groups), "`scale_groups` must be integers, one per quantity")
         need(math.isfinite(self.bound_width) and self.bound_width >= 0,
              f"`bound_width` must be a finite number >= 0, got {self.bound_width}")
         need(math.isfinite(self.geodesic) and 0 <= self.geodesic < 2, f"`geodesic` must be in [0, 2), got {self.geodesic}")
+        need(self.bounds in ("transform", "box"), f"`bounds` must be 'transform' or 'box', got {self.bounds!r}")
+        need(self.bounds == "transform" or (self.geodesic == 0 and self.bound_width == 0),
+             "`bounds='box'` takes plain steps in the physical coordinates: it needs `geodesic` = 0 and "
+             f"`bound_width` = 0, got {self.geodesic} and {self.bound_width}")
         for name in ("min_grad", "cost_goal", "min_rel_step", "min_rel_cost_change", "stall_decrease", "tau"):
             need(getattr(self, name) >= 0, f"`{name}` must be >= 0, got {getattr(self, name)}")
 
@@ -160,7 +178,8 @@ class LMResult:
     cost : float                E = 1/2 e^T e at ``x`` (inf only for "diverged_at_start")
     status, message : str       a key of ``STATUS_MESSAGES`` and a sentence with details
     iterations : int            accepted steps
-    cost_history, mu_history : tuple of float, length iterations + 1 (start value, then after each step)
+    cost_history, mu_history : tuple of float, length iterations + 1 (start value, then after each step; for
+                                ``damping="trust"`` the trust radius)
     jac : ndarray (M, P)        last model Jacobian d yhat / d x at ``x`` (external coordinates; a CSR
                                 matrix when ``fun`` returns sparse Jacobians)
     residual : ndarray (M,)     e = y - yhat at ``x``
@@ -327,7 +346,7 @@ class _Transposed:
 
 
 def _dense(Ju) -> np.ndarray:
-    if isinstance(Ju, _ScaledColumns):
+    if isinstance(Ju, (_ScaledColumns, _Subset)):
         return Ju.dense()
     return Ju.toarray() if sparse.issparse(Ju) else Ju
 
@@ -395,7 +414,8 @@ def levenberg_marquardt(
     names : sequence of str (P,)
         Quantity names for messages.
     lower, upper : array_like (P,), scalar or None
-        Bounds, ``-inf``/``inf``/None for none; enforced by a transform, never by clipping.
+        Bounds, ``-inf``/``inf``/None for none; enforced by a transform, or with ``options.bounds = "box"`` by
+        steps held inside them (:mod:`.boxstep`); never by clipping a step after the fact.
     options : LMOptions
     callback : callable ``callback(iteration, x, cost, mu) -> bool | None``, optional
         Called after each accepted step; returning True stops with status "callback_stop".
@@ -427,6 +447,9 @@ def levenberg_marquardt(
     opt = options
     if opt.bound_width > 0:
         bounds = bounds.with_width(_widths(bounds, x0, opt.bound_width))
+    box = None
+    if opt.bounds == "box":  # the trainer's coordinates are the quantities themselves; the steps keep the box
+        box, bounds = bounds, Bounds.make(names)
     n_params = x0.size
     counters = _Counters()
 
@@ -450,7 +473,7 @@ def levenberg_marquardt(
             mu=opt.mu0,
         )
     point = _Point(u, x, first[0], first[1], _cost(first[0]))
-    mu0 = _first_mu(point, bounds, opt)
+    mu0 = _first_mu(point, bounds, opt) if opt.damping != "trust" else math.nan
     # One object holds the whole state so that a KeyboardInterrupt can never leave it half-updated.
     state = (point, mu0, (point.cost,), (mu0,))
     col = None  # the running column norms of "jac" scaling
@@ -470,18 +493,23 @@ def levenberg_marquardt(
             if iteration >= opt.max_iter:
                 status = "max_iter"
                 break
-            if mu > opt.mu_max:
+            if mu > opt.mu_max and opt.damping != "trust":
                 status = "mu_max"
                 break
             if opt.scale == "jac":
                 col = _column_scale(Ju, col, opt.scale_groups, A)
+            if opt.damping == "trust" and not math.isfinite(mu):  # the first radius: the start's scaled size
+                mu = float(np.linalg.norm(point.u * (1.0 if col is None else np.where(col > 0, col, 1.0)))) or 1.0
+                mus = (mu,)
             status, new_point, mu, tiny, rho = _inner(
-                fun, residual, guard, bounds, point, Ju, g, mu, opt, counters, col, A
+                fun, residual, guard, bounds, point, Ju, g, mu, opt, counters, col, A, box
             )
             if new_point is not None:
                 rel_decrease = (point.cost - new_point.cost) / point.cost if point.cost > 0 else 0.0
                 if opt.damping == "nielsen":
                     mu = nielsen_accepted(mu, rho, opt.mu_min)
+                elif opt.damping == "trust":
+                    pass  # _inner moved the radius
                 else:
                     mu = mu_accepted(mu, opt.mu_dec, opt.mu_min)
                 state = (new_point, mu, costs + (new_point.cost,), mus + (mu,))
@@ -593,8 +621,9 @@ def _first_mu(point: _Point, bounds: Bounds, opt: LMOptions) -> float:
 
 
 def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float, opt: LMOptions, counters,
-           col: np.ndarray | None = None, A: np.ndarray | None = None):
-    """Raise mu until a trial step lowers the cost (``col``: the column scale D of ``scale="jac"``).
+           col: np.ndarray | None = None, A: np.ndarray | None = None, box: Bounds | None = None):
+    """Raise mu until a trial step lowers the cost (``col``: the column scale D of ``scale="jac"``; ``box``: the
+    bounds of ``bounds="box"``, the trainer's coordinates then being the quantities themselves).
 
     Returns (status or None, accepted point or None, mu, tiny step flag, gain ratio of the accepted step).
     """
@@ -617,31 +646,47 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
         A, gs = _gram(Js), Js.T @ point.e
     x_norm = float(np.linalg.norm(point.x))
     nu = 2.0  # Nielsen's growth of mu on refusals in a row
+    radius = mu if opt.damping == "trust" else None
     for tries in range(opt.max_mu_tries):
+        if radius is not None:
+            mu = _mu_for_radius(A, g if scale is None else gs, radius)
         if scale is None:
             du = damped_step(Ju, point.e, A, g, mu)
         else:
             du = damped_step(Js, point.e, A, gs, mu) / scale
+        if box is not None:
+            solved = (Ju, A, g, np.ones_like(g)) if scale is None else (Js, A, gs, scale)
+            du = feasible_step(point.x, du, box.lower, box.upper,
+                               lambda held, value, s=solved, m=mu: _held_step(*s, point.e, m, held, value))
         if opt.geodesic > 0 and residual is not None:
             du = _accelerated(residual, bounds, point, Ju, Js if scale is not None else Ju, A, scale, du, mu,
                               opt.geodesic, counters)
         u_t = point.u + du
+        if box is not None:  # rounding must not carry x + theta (bound - x) past the bound
+            u_t = np.clip(u_t, box.lower, box.upper)
         x_t = bounds.to_external(u_t)
         tiny = float(np.linalg.norm(x_t - point.x)) <= opt.min_rel_step * (opt.min_rel_step + x_norm)
         # right after an accepted step a trial is likely accepted too: simulate it with its Jacobian at once
         # (trial_jacobian) instead of a residual now and the Jacobian's simulation again once accepted
         cheap = residual if not (opt.trial_jacobian and tries == 0) else None
         trial = _try(fun, cheap, guard, u_t, x_t, point.cost, counters)
-        if trial is not None and opt.damping == "nielsen":
+        if trial is not None and opt.damping in ("nielsen", "trust"):
             predicted = _predicted_decrease(du, g, Ju)
             # a model that predicted no decrease where the cost fell (rounding, or a geodesic bend) counts as good
             rho = (point.cost - trial.cost) / predicted if predicted > 0 and math.isfinite(predicted) else 1.0
         else:
             rho = math.nan
+        step_norm = float(np.linalg.norm(du if scale is None else du * scale))
         if trial is not None:
+            if radius is not None:
+                radius = trust_accepted(radius, rho, step_norm)
+                return None, trial, radius, tiny, rho
             return None, trial, mu, tiny, rho
         if tiny:  # the cost no longer decreases along steps at rounding level: converged
-            return "small_step", None, mu, tiny, rho
+            return "small_step", None, mu if radius is None else radius, tiny, rho
+        if radius is not None:
+            radius = 0.25 * step_norm
+            continue
         if opt.damping == "nielsen":
             mu, nu = nielsen_refused(mu, nu, math.inf)
         else:
@@ -649,6 +694,88 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
         if mu > opt.mu_max:
             return "mu_max", None, mu, tiny, rho
     return "max_mu_tries", None, mu, False, math.nan
+
+
+def trust_accepted(radius: float, rho: float, step_norm: float) -> float:
+    """The trust radius after an accepted step (Moré 1978): a quarter of the step where the model predicted
+    badly, twice the step where it predicted well, unchanged between."""
+    if rho < 0.25:
+        return 0.25 * step_norm
+    if rho > 0.75:
+        return max(radius, 2.0 * step_norm)
+    return radius
+
+
+#: The trust radius's step length is solved to this fraction of the radius (MINPACK's lmpar takes 0.1).
+RADIUS_TOLERANCE = 1e-6
+
+
+def _mu_for_radius(A: np.ndarray, g: np.ndarray, radius: float) -> float:
+    """The smallest damping whose step (A + mu I)^-1 g is no longer than ``radius`` (to RADIUS_TOLERANCE of it),
+    0 where the Gauss-Newton step fits: Hebden's Newton iteration on 1/|p(mu)| (Moré 1978, as MINPACK's lmpar),
+    one Cholesky factorization per iteration (no eigen-decomposition: a multiple-shooting fit has hundreds of
+    quantities), kept within the bracket [|g|/radius - trace A, |g|/radius] where the secular function
+    changes sign."""
+    n = A.shape[0]
+    eye = np.eye(n)
+
+    def step(m):
+        try:
+            factor = cho_factor(A + m * eye, check_finite=False)
+        except LinAlgError:
+            return None, None
+        p = cho_solve(factor, g, check_finite=False)
+        if not np.all(np.isfinite(p)):
+            return None, None
+        R, lower = factor
+        q = solve_triangular(R, p, trans="T" if not lower else "N", lower=lower, check_finite=False)
+        return p, q
+
+    p, _ = step(0.0)
+    if p is not None and float(np.linalg.norm(p)) <= radius * (1.0 + RADIUS_TOLERANCE):
+        return 0.0
+    gnorm = float(np.linalg.norm(g))
+    hi = gnorm / radius  # |p(mu)| <= |g| / mu
+    lo = max(0.0, hi - float(np.trace(A)))  # |p(mu)| >= |g| / (mu + largest eigenvalue), which trace(A) bounds
+    mu = hi if lo == 0.0 else math.sqrt(lo * hi)
+    for _ in range(50):
+        p, q = step(mu)
+        if p is None:  # A + mu I not numerically positive definite: mu is too small
+            lo, mu = mu, hi if lo == 0.0 else math.sqrt(mu * hi)
+            continue
+        length = float(np.linalg.norm(p))
+        if abs(length - radius) <= RADIUS_TOLERANCE * radius:
+            return mu
+        if length > radius:
+            lo = mu
+        else:
+            hi = mu
+        qq = float(q @ q)
+        newton = mu + (length / radius) * (length - radius) * length / qq if qq > 0 else math.nan
+        mu = newton if lo < newton < hi else (0.5 * (lo + hi) if lo > 0 else 0.1 * hi)
+    return hi
+
+
+def _held_step(Js, A, gs, scale, e, mu: float, held: np.ndarray, value: np.ndarray) -> np.ndarray:
+    """The damped step in the quantities' coordinates with the ``held`` components at ``value`` and the others
+    solving (A + mu I)_FF z_F = gs_F - A_FH z_H in the scaled coordinates z = scale * dx of ``A``, ``gs``."""
+    free = ~held
+    z_held = np.where(held, scale * value, 0.0)
+    rhs = gs[free] - A[np.ix_(free, held)] @ z_held[held]
+    z = damped_step(_Subset(Js, free), e - Js @ z_held, A[np.ix_(free, free)], rhs, mu)
+    step = value.copy()
+    step[free] = z / scale[free]
+    return step
+
+
+class _Subset:
+    """Some columns of J (dense, CSR or _ScaledColumns), formed only where damped_step falls back to lstsq."""
+
+    def __init__(self, J, columns: np.ndarray):
+        self.J, self.columns = J, columns
+
+    def dense(self) -> np.ndarray:
+        return _dense(self.J)[:, self.columns]
 
 
 def _predicted_decrease(du: np.ndarray, g: np.ndarray, Ju) -> float:

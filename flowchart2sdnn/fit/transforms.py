@@ -18,7 +18,8 @@ With ``w = 1`` the bend sits at one *unit* of the quantity, so a friction coeffi
 deep in the bend (``x`` about ``u**2 / 2``) while a stiffness of 570 N·m/rad does not, and plain LM steps crawl
 along the transform's own curvature (benchmarks/bench_rough_init.py, coulomb chart). The trainer's
 ``bound_width`` sets ``w`` from the start values. It is not identify's default: a quantity whose minimum is its
-bound then meets a bend 1/w times sharper there (docs/rough_init.md, "Speed").
+bound then meets a bend 1/w times sharper there (docs/rough_init.md, "Speed"). The trainer's ``bounds = "box"``
+(:mod:`.boxstep`) keeps the bounds without this transform; identify uses it on charts without learned curves.
 
 The Jacobian of the model with respect to ``u`` follows from the chain rule, ``J_u = J_x * dx/du``.
 At a bound ``dx/du`` is zero, so a quantity that *starts* exactly at a bound could never move;

@@ -158,6 +158,7 @@ def from_document(doc: dict, chart: Diagram | None = None) -> Identification:
     s["fixed_from"] = tuple(s.get("fixed_from", ()))
     s.setdefault("curve_start", "random")  # a result written before the key existed started from random curves
     s.setdefault("lm_damping", "trainlm")  # ... and one written before lm_damping used trainlm's schedule
+    s.setdefault("lm_bounds", "transform")  # ... and one written before lm_bounds kept its bounds by the transform
     settings = IdentifySettings(**s)
     fit = doc["fit"]
     ms = doc.get("multistart")

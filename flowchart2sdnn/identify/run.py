@@ -277,14 +277,19 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
     """
     params = {p.name for p in problem.network.parameters}
     groups = tuple(i if n in params else -1 for i, n in enumerate(problem.names))
+    names = set(problem.names)
+    learned = any(w.name in names for w in problem.network.free_weights)
+    bounds = settings.lm_bounds
+    if bounds == "auto":  # the transform where learned curves are fitted (settings.LM_BOUNDS)
+        bounds = "transform" if learned else "box"
     damping = settings.lm_damping
-    if damping == "auto":  # trainlm's where learned curves are fitted (settings.IDENTIFY_DAMPING)
-        names = set(problem.names)
-        damping = "trainlm" if any(w.name in names for w in problem.network.free_weights) else IDENTIFY_DAMPING
+    if damping == "auto":  # trainlm's where learned curves are fitted (settings.IDENTIFY_DAMPING, LM_BOUNDS)
+        damping = "trainlm" if learned else "trust" if bounds == "box" else IDENTIFY_DAMPING
     return LMOptions(max_iter=settings.max_iter, min_rel_cost_change=MIN_REL_COST_CHANGE, tau=settings.lm_tau,
                      stall_decrease=settings.converged_decrease / max(1, problem.n_residuals),
                      scale=settings.lm_scale, scale_groups=groups if settings.lm_scale == "jac" else (),
-                     geodesic=settings.lm_geodesic, damping=damping, trial_jacobian=damping == "nielsen")
+                     geodesic=settings.lm_geodesic if bounds == "transform" else 0.0, damping=damping,
+                     trial_jacobian=damping in ("nielsen", "trust"), bounds=bounds)
 
 
 def _second_look(problem: Problem, x0, lower, upper, settings: IdentifySettings, starts: str, auto, out: _Outcome,

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = ["IdentifySettings", "SHOOTING", "SHOOTING_STARTS", "IDENTIFY_TAU", "REFIT_TAU", "ONLINE_TAU", "MIN_REL_COST_CHANGE",
-           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "IDENTIFY_DAMPING", "LM_DAMPING", "FLOOR_BIAS", "CURVE_START"]
+           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "IDENTIFY_DAMPING", "LM_DAMPING", "LM_BOUNDS", "FLOOR_BIAS", "CURVE_START"]
 
 #: First LM damping mu = tau * max diag(JᵀJ) (Madsen-Nielsen-Tingleff) for a fit from a chart's rough `init`:
 #: with trainlm's fixed 1e-3 a single start from the paper's Table 1 reached J1 in 2 of 5 seeds, with this 5/5.
@@ -44,11 +44,19 @@ IDENTIFY_GEODESIC = 0.75
 #: chart's valley (seed-1 bench: costs 1.116-1.117 against 1.120-1.121) but then the stall rule does not stop it
 #: within 1000 iterations (3 of 8 draws at the limit against none).
 IDENTIFY_DAMPING = "nielsen"
-#: IdentifySettings.lm_damping's default: "auto" is IDENTIFY_DAMPING where no learned curve is fitted, trainlm's
-#: elsewhere. diagnose's refits keep "trainlm": its brief refits (tens of iterations from next to a fit) and its
+#: IdentifySettings.lm_damping's default: "auto" is IDENTIFY_DAMPING where no learned curve is fitted and the
+#: bounds are kept by the transform, "trust" (a trust radius) where they are kept in the box (LM_BOUNDS), trainlm's
+#: where learned curves are fitted. diagnose's refits keep "trainlm": its brief refits (tens of iterations from next to a fit) and its
 #: benches were measured with it, and with Nielsen's slower cut of mu (/3 at most, not /10) the tanks bench's first
 #: round credited a saturation of u instead of the upper tank's overflow (tests/test_diagnose_overflow.py).
 LM_DAMPING = "auto"
+#: IdentifySettings.lm_bounds's default: "auto" handles the bounds without a transform ("box": plain steps in the
+#: physical, column-scaled coordinates held inside the bounds, fit.boxstep; their length set by a trust radius,
+#: fit.lm damping "trust", as scipy's trf does) where no learned curve is fitted, by the transform of
+#: fit.transforms elsewhere (the learned curves' valley needs the geodesic steps measured with it). Coulomb bench
+#: (benchmarks/bench_rough_init.py, 30 s, 8 rough draws, one run): 0.88x scipy trf's seconds per draw (median 16
+#: iterations), the transform's geodesic steps 1.95x (22); same minima, every draw converged (docs/rough_init.md).
+LM_BOUNDS = "auto"
 #: An LM iteration that gains less than this fraction of the cost ends the fit: further ones only polish noise.
 MIN_REL_COST_CHANGE = 1e-10
 #: A fit has converged when its last 10 iterations together lowered the cost E by less than this many times
@@ -110,8 +118,11 @@ class IdentifySettings:
     lm_scale : str           "jac": damping scaled per quantity by the Jacobian's column norms (see
                              :data:`IDENTIFY_SCALE`); "none": trainlm's mu I
     lm_geodesic : float      geodesic acceleration's largest bend (see :data:`IDENTIFY_GEODESIC`); 0: plain steps
-    lm_damping : str         LM's damping schedule: "auto" (see :data:`LM_DAMPING`), "nielsen" (Nielsen's, with the
-                             first trial of each iteration simulated with its Jacobian) or "trainlm" (x0.1 / x10)
+    lm_damping : str         LM's damping schedule: "auto" (see :data:`LM_DAMPING`; "trust" where lm_bounds resolves
+                             to "box"), "nielsen" (Nielsen's, with the first trial of each iteration simulated with
+                             its Jacobian), "trainlm" (x0.1 / x10) or "trust" (a trust radius sets each step's length)
+    lm_bounds : str          how LM keeps the bounds: "auto" (see :data:`LM_BOUNDS`), "transform" (a change of
+                             variables, fit.transforms) or "box" (plain steps held inside them; lm_geodesic unused)
     converged_decrease : float  converged when 10 iterations together gain less than this many times E/N
                              (see :data:`CONVERGED_DECREASE`); 0 runs to ``max_iter``
     init_window : int        > 0: the validation record's initial state is fitted on its first init_window
@@ -149,6 +160,7 @@ class IdentifySettings:
     lm_scale: str = IDENTIFY_SCALE
     lm_geodesic: float = IDENTIFY_GEODESIC
     lm_damping: str = LM_DAMPING
+    lm_bounds: str = LM_BOUNDS
     converged_decrease: float = CONVERGED_DECREASE
     init_window: int = 0
     shooting: str | int = SHOOTING
@@ -185,6 +197,8 @@ class IdentifySettings:
               f"curve_start must be 'stick' or 'random', got {self.curve_start!r}")
         _need(self.lm_scale in ("jac", "none"), f"lm_scale must be 'jac' or 'none', got {self.lm_scale!r}")
         _need(0 <= self.lm_geodesic < 2, f"lm_geodesic must be in [0, 2), got {self.lm_geodesic}")
-        _need(self.lm_damping in ("auto", "nielsen", "trainlm"),
-              f"lm_damping must be 'auto', 'nielsen' or 'trainlm', got {self.lm_damping!r}")
+        _need(self.lm_damping in ("auto", "nielsen", "trainlm", "trust"),
+              f"lm_damping must be 'auto', 'nielsen', 'trainlm' or 'trust', got {self.lm_damping!r}")
+        _need(self.lm_bounds in ("auto", "transform", "box"),
+              f"lm_bounds must be 'auto', 'transform' or 'box', got {self.lm_bounds!r}")
         _need(self.lm_tau >= 0 and math.isfinite(self.lm_tau), f"lm_tau must be a finite number >= 0, got {self.lm_tau}")
