@@ -33,8 +33,8 @@ accepted in 18 runs, 20-600 s a run. With it (f2404f4): 0 accepted in 18 runs, e
 and 0.03 seeds 2-3 stop at 1000, not traced: 0 accepted in 6 runs, 1.5-25 min a run on a loaded core. At
 diagnose's old default of 100 iterations none would have converged, hence the default 1000. Three-mass learned
 chart after the curves' start on sub-steps was fixed (3dc695d): 0 accepted in 9 runs, 7 traced (first fits
-converged in 53-699 iterations), 2 first fits at the 1000 limit. Not run at the current commit: two-mass 0.003
-seeds 2-3, 0.01 seed 1.
+converged in 53-699 iterations), 2 first fits at the 1000 limit. The last three two-mass cells (5ac290f): 0.003
+seeds 2-3 traced (first fits 148, 374 iterations), nothing accepted; 0.01 seed 1 not traced: 0 of 18 learned runs.
 Tables: docs/diagnose.md. The printed first fit gives its LM iterations.
 """
 
