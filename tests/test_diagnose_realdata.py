@@ -34,8 +34,10 @@ def test_emps_friction_is_found_on_the_velocity_and_the_test_error_falls():
     chart = real.with_initial_speed(load_diagram(DATA / "emps_mass.yaml"), train)
     assert chart.block("v").init == pytest.approx(0.0059, abs=0.001)
     d = diagnose(chart, train, (), DiagnoseSettings(rounds=1))
-    # the physical option of friction (Coulomb + offset + one-sided viscous) beats the learned curve
-    assert d.report["accepted"][0] == {"effect": "friction", "at": "v", "option": "coulomb", "label": "coulomb"}
+    # friction at the speed: since the geodesic LM steps (876a401) the learned curve's refit validates at 2.67 mm
+    # and beats the physical option (Coulomb + offset + one-sided viscous, 6.23 mm); either is friction at v
+    acc = d.report["accepted"][0]
+    assert (acc["effect"], acc["at"]) == ("friction", "v"), acc
     first = d.report["rounds"][0]
     assert first["validation_rms_after"] < first["validation_rms_before"] / 10
     before = identify(d.nominal.diagram, train, None, IdentifySettings(max_iter=150))
