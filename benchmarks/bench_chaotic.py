@@ -90,7 +90,7 @@ def main(settings: list[str], substeps: str | None, plants: list[str] | None = N
             rms = result["fit"]["validation"]["rms"]
             err = max(abs(result["parameters"][p]["value"] / v - 1) * 100 for p, v in TRUTH.items())
             kept = result.get("shooting", {}).get("final_length", "whole")
-            print(f"{name:9} {setting:8} {rms['w1']:10.4f} {rms['w2']:10.4f} {err:13.2f} {kept!s:>7} {wall:6.0f}")
+            print(f"{name:9} {setting:8} {rms['w1']:10.5f} {rms['w2']:10.5f} {err:13.2f} {kept!s:>7} {wall:6.0f}")
 
 
 if __name__ == "__main__":
