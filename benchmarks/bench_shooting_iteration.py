@@ -19,7 +19,10 @@ damping; loaded machine, --repeat 1, the trust radius's mu by eigen-decompositio
 1.24x; 2 threads 1.08x), L = 500 1.08x (1.10x; 1.00x), L = 2500 1.88x (1.23x; 1.44x): at L = 2500 the segmented
 fit refused 3 trials in 5 iterations where single shooting refused none (9 Jacobians and 3 residuals against 7
 and 1; a refused first trial is simulated with its Jacobian), so its per-iteration ratio counts them; the work
-ratio does not.
+ratio does not. Again 27 Nov (merged, loaded, --repeat 3): L = 100 1.08x, L = 500 1.08x, L = 2500 1.82x (work 1.27x,
+1.20x, 1.54x); with --iterations 20 (both stop on their own: single shooting after 12 iterations, 17 Jacobians and
+16 residuals; L = 2500 after 17) L = 2500 1.21-1.34x (work 1.09-1.14x), L = 100 2.6x (6 iterations, 14 refused
+trials).
 
 Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_shooting_iteration.py [--seconds 25] [--length 100 --length
 500 --length 2500] [--iterations 5] [--repeat 3] [--threads 2]``.
