@@ -113,3 +113,24 @@ def test_a_fit_at_the_noise_floor_scores_the_whole_record():
     fitted = fit_chart(plant, train, records, SETTINGS, 5, 0, "chart")  # the plant itself: nothing missing
     problem = current_problem(fitted, train, SETTINGS)
     assert score_rows(fitted, problem, train, SETTINGS) is None
+
+
+def test_the_tracked_parts_picks_join_the_refit_set_once_as_their_whole_record_scores():
+    from types import SimpleNamespace
+
+    from flowchart2sdnn.diagnose.loop import _union
+    from flowchart2sdnn.diagnose.score import Baseline, Score, Screen
+
+    def cand(effect, at, label):
+        return SimpleNamespace(key=(effect, at), label=label)
+
+    def score(c, value):
+        return Score(c, value, 1.0, 1.0 - value, 1, 2 * value, 0.0)
+
+    sat, cog6, cog8 = cand("saturation", "M1", "L=9"), cand("cogging", "w1", "p=6"), cand("cogging", "w1", "p=8")
+    whole = [score(sat, 10.0), score(cog6, 3.0), score(cog8, 2.0)]
+    scr = Screen(Baseline(1.0, 0.0, 1, 10, 1, 0.1), tuple(whole))
+    best = [whole[0], whole[1]]
+    picks = [score(cog8, 50.0), score(cog6, 40.0)]  # scored on the tracked part: already-present cog6 not twice
+    out = _union(best, picks, scr)
+    assert out == [whole[0], whole[1], whole[2]]  # cog8 joins as its whole-record Score (the report's ranking)
