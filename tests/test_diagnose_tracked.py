@@ -27,6 +27,7 @@ from flowchart2sdnn.diagnose.tracked import (
     ROWS_PER_QUANTITY,
     WINDOW,
     prefix_problem,
+    record_rows,
     score_rows,
     tracked_rows,
 )
@@ -58,6 +59,16 @@ def test_the_tracked_part_ends_where_a_hand_computed_running_rms_crosses_half_th
     assert tracked_rows(e[:t0], floor_ms=NOISE_MARGIN ** 2 * NOISE ** 2) == t0
     # short residuals: whole
     assert tracked_rows(e[:WINDOW - 1]) == WINDOW - 1
+    # raised to a floor of 500 rows, still followed better than the rest: the part is kept
+    assert record_rows(e, NOISE ** 2, 500) == expect
+    # raised to 2000 rows the part takes in the diverged residual: not followed better than the rest, whole record
+    assert np.mean(e[:2000] ** 2) > FOLLOW_FRACTION ** 2 * whole
+    assert record_rows(e, NOISE ** 2, 2000) == n
+    # a residual off the floor all along (5x the noise, no divergence): the first window crosses the bound, but
+    # the floor's 500 rows are not followed better than the rest, so the whole record is scored
+    flat = 5 * NOISE * rng.standard_normal((n, 2))
+    assert tracked_rows(flat) < 500
+    assert record_rows(flat, NOISE_MARGIN ** 2 * NOISE ** 2, 500) == n
 
 
 @pytest.fixture(scope="module")

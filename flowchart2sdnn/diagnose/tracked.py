@@ -19,7 +19,9 @@ followed whole.
 When (:func:`score_rows`): only when the current fit is unpredictable (:func:`~.fitting.unpredictable`: its chart
 amplifies a moved start beyond SUSPECT_PEAK and its residual is off the noise floor), and only when some record's
 tracked part is shorter than the record. The tracked part is never shorter than ``min_rows``: the growing
-horizon's first stage (``settings.horizon``), and at least ``ROWS_PER_QUANTITY`` rows per fitted quantity.
+horizon's first stage (``settings.horizon``), and at least ``ROWS_PER_QUANTITY`` rows per fitted quantity; where
+that floor makes the part, it must still be followed better than the rest (:func:`record_rows`), else the record
+is scored whole: a residual off the floor from the start (a missing friction) is no lost record.
 
 Layer: diagnose.
 """
@@ -36,7 +38,7 @@ from ..identify.problem import Problem, build_problem
 from ..identify.shooting import NOISE_MARGIN, noise_level
 from .fitting import DiagnoseSettings, Fitted, unpredictable
 
-__all__ = ["WINDOW", "FOLLOW_FRACTION", "ROWS_PER_QUANTITY", "tracked_rows", "score_rows", "prefix_records",
+__all__ = ["WINDOW", "FOLLOW_FRACTION", "ROWS_PER_QUANTITY", "tracked_rows", "record_rows", "score_rows", "prefix_records",
            "prefix_problem"]
 
 #: rows of the running mean square: the mean square of 100 rows of white noise (per output) spreads by
@@ -84,6 +86,19 @@ def tracked_rows(residual: np.ndarray, window: int = WINDOW, fraction: float = F
     return int(over[0] + window - 1) if over.size else rows
 
 
+def record_rows(residual: np.ndarray, floor_ms: float, min_rows: int) -> int:
+    """One record's scored rows: its tracked part (:func:`tracked_rows`) raised to `min_rows`, or the whole record
+    when the raised part is not followed better than the rest (its mean square above the bound of
+    :func:`tracked_rows`: a residual off the floor all along, not a fit that loses the record, where the floor
+    alone would make the part)."""
+    e = np.asarray(residual, dtype=float).reshape(len(residual), -1)
+    n = e.shape[0]
+    rows = min(n, max(min_rows, tracked_rows(e, floor_ms=floor_ms)))
+    if rows < n and np.mean(e[:rows] ** 2) > FOLLOW_FRACTION ** 2 * np.mean(e ** 2):
+        return n
+    return rows
+
+
 def score_rows(fitted: Fitted, problem: Problem, train: Sequence[Dataset],
                settings: DiagnoseSettings) -> list[int] | None:
     """Per training record, the rows (of its fitted targets) the score test should use, or None for all of them.
@@ -102,9 +117,8 @@ def score_rows(fitted: Fitted, problem: Problem, train: Sequence[Dataset],
     rows, at = [], 0
     for s in problem.segments:
         n, n_out = s.targets.shape
-        part = e[at:at + n * n_out].reshape(n, n_out)
+        rows.append(record_rows(e[at:at + n * n_out].reshape(n, n_out), floor_ms, min_rows))
         at += n * n_out
-        rows.append(min(n, max(min_rows, tracked_rows(part, floor_ms=floor_ms))))
     if all(r >= s.targets.shape[0] for r, s in zip(rows, problem.segments, strict=True)):
         return None
     return rows
