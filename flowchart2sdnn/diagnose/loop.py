@@ -3,7 +3,9 @@
 One round:
 
 1. the current chart is fitted (round 1: the chart as given);
-2. every effect of the library at every place and option is scored by the score test (:mod:`.score`);
+2. every effect of the library at every place and option is scored by the score test (:mod:`.score`); when the
+   current fit is unpredictable and loses the record part way (a chaotic drive), also on the part of each record
+   it still follows (:mod:`.tracked`), whose best place joins the refits of step 3;
 3. the best ``top`` places whose score is significant are refitted briefly (``refit_iter`` LM iterations),
    from the current fit with the effect added at neutral values, and from the chart as given with every
    accepted effect and this one added at neutral values (a refit only from the previous fit gets stuck where
