@@ -114,7 +114,9 @@ def _log(rep: dict) -> None:
     for r in rep["rounds"]:
         ctrl = r.get("control") or {}
         print(f"    round {r['round']}: {r['effect']}@{r['at']} {r.get('label', '')} accepted={r['accepted']} "
-              f"{r['reason']} (control val {ctrl.get('validation_rms')})")
+              f"{r['reason']} (control val {ctrl.get('validation_rms')})"
+              + (f"; also scored on rows {r['score_rows']}, added {r.get('score_rows_added')}"
+                 if r.get("score_rows") else ""))
 
 
 def run_one(key: str, seed: int, noise: float, shooting, log: bool) -> dict:

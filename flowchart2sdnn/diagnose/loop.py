@@ -3,7 +3,9 @@
 One round:
 
 1. the current chart is fitted (round 1: the chart as given);
-2. every effect of the library at every place and option is scored by the score test (:mod:`.score`);
+2. every effect of the library at every place and option is scored by the score test (:mod:`.score`); when the
+   current fit is unpredictable and loses the record part way (a chaotic drive), also on the part of each record
+   it still follows (:mod:`.tracked`), whose best place joins the refits of step 3;
 3. the best ``top`` places whose score is significant are refitted briefly (``refit_iter`` LM iterations),
    from the current fit with the effect added at neutral values, and from the chart as given with every
    accepted effect and this one added at neutral values (a refit only from the previous fit gets stuck where
@@ -57,6 +59,7 @@ from .fitting import (
     with_floor,
 )
 from .score import Candidate, Score, Screen, screen
+from .tracked import prefix_problem, score_rows
 
 __all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "refit_unit", "refusal", "fit_chart", "horizons",
            "candidates", "done_key", "gain_spread", "whole_run_stop", "REPORT_FORMAT", "REPORT_VERSION"]
@@ -99,6 +102,41 @@ def _refit_set(scr: Screen, settings: DiagnoseSettings) -> list[Score]:
         more = [s for s in scr.scores if significant(s) and s.candidate.key == key and s is not best[0]]
         best[1:1] = more[: settings.runners_up]
     return best
+
+
+def _prefix_screen(cands: list[Candidate], current: Fitted, problem, train: list[Dataset],
+                   settings: DiagnoseSettings, say) -> tuple[list[int] | None, tuple[float, list[Score]] | None]:
+    """The score test on the part of each training record the current fit still follows (:mod:`.tracked`), when
+    it does not follow the whole record: (rows per record or None, (seconds, the best place's picks) or None).
+
+    The picks are the best significant place of that screen with its runners-up (:func:`_refit_set`'s first
+    place): on a chaotic record the whole-record ranking is about the diverged part (cogging bench, seeds 2-3),
+    the tracked part's ranking about the missing effect; both are refitted and judged on the whole records."""
+    rows = score_rows(current, problem, train, settings)
+    if rows is None:
+        return None, None
+    built = prefix_problem(current, train, settings, rows)
+    if built is None:
+        return rows, None
+    say(f"score test on the tracked part of the records ({', '.join(map(str, rows))} rows)", None)
+    part = screen(cands, built[0], built[1], settings.alignment, settings.seed, settings.top_options)
+    picks = _refit_set(part, settings)
+    picks = [s for s in picks if picks and s.candidate.key == picks[0].candidate.key]
+    return rows, (part.seconds, picks)
+
+
+def _union(best: list[Score], picks: list[Score], scr: Screen) -> list[Score]:
+    """`best` plus the `picks` (scored on the tracked part) it lacks, each as its whole-record Score where that is
+    scored (so that REPORT.json's ranking marks it refitted)."""
+    have = {(s.candidate.key, s.candidate.label) for s in best}
+    whole = {(s.candidate.key, s.candidate.label): s for s in scr.scores if s.scored}
+    out = list(best)
+    for s in picks:
+        k = (s.candidate.key, s.candidate.label)
+        if k not in have:
+            have.add(k)
+            out.append(whole.get(k, s))
+    return out
 
 
 def _order(refits: list[tuple[Score, Fitted]], settings: DiagnoseSettings) -> list[tuple[Score, Fitted]]:
@@ -265,6 +303,14 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             screens.append(scr)
             timing["screen"].append(scr.seconds)
             best = _refit_set(scr, settings)
+            rows, prefix_best = _prefix_screen(cands, current, problem, train, settings, say)
+            if prefix_best:
+                timing["screen"][-1] += prefix_best[0]
+                best = _union(best, prefix_best[1], scr)
+            # REPORT.json: the rows of each training record the tracked-part score used (None: not used) and the
+            # candidates it added to the refits
+            round_extra = {"score_rows": rows,
+                           "score_rows_added": [s.candidate.title() for s in prefix_best[1]] if prefix_best else []}
             refits: list[tuple[Score, Fitted]] = []
             for s, fitted, seconds in _refits(best, nominal_chart, train, records, settings, extra_dof, accepted,
                                               executor, lambda text, r=r: say(f"round {r}: {text}", None)):
@@ -319,7 +365,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             control_entry = _control_entry(control, baseline is not current)
             if choice is None:
                 s, f = refits[0] if refits else (best[0], None)
-                rounds.append({**_round_entry(r, s, current, f, False, reason, settings), "control": control_entry})
+                rounds.append({**_round_entry(r, s, current, f, False, reason, settings), "control": control_entry,
+                               **round_extra})
                 stop_reason = "nothing_accepted"
                 if baseline is not current:
                     # the same chart, refitted to a better point: the final chart is that fit, not the one the
@@ -338,7 +385,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                 polished = f  # the brief refit validates better: stop early there
             polished = with_floor(polished, records, settings)  # the next round's candidates must beat its floor
             rounds.append({**_round_entry(r, s, current, polished, True, "validation RMS and "
-                                          f"{settings.criterion.upper()} fell", settings), "control": control_entry})
+                                          f"{settings.criterion.upper()} fell", settings), "control": control_entry,
+                           **round_extra})
             accepted.append({"effect": c.name, "at": c.at, "option": s.as_dict()["option"], "label": c.label})
             done.add(done_key(c))
             nominal_chart = c.effect.patch(nominal_chart, c.place, c.option)

@@ -93,6 +93,10 @@ def format_report(report: dict, limit: int = 10) -> str:
         out.append(table(["round", "effect", "accepted", "train RMS", "validation RMS", "AIC", "val fit %"],
                          rows).rstrip())
         for r in report["rounds"]:
+            if r.get("score_rows"):
+                added = ", ".join(r.get("score_rows_added") or []) or "nothing new"
+                out.append(f"round {r['round']}: the fit loses the record; also scored on the part it follows "
+                           f"({', '.join(map(str, r['score_rows']))} rows), which added to the refits: {added}")
             if not r["accepted"]:
                 out.append(f"round {r['round']}: not accepted - {r['reason']}")
     accepted = report.get("accepted") or []
