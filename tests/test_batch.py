@@ -322,9 +322,13 @@ def test_diagnose_finds_the_friction_a_chart_lacks(fleet, tmp_path):
     lacking = "\n".join(line for line in lacking.splitlines() if not line.lstrip().startswith(("sg:", "MF:")))
     chart = tmp_path / "nofric.yaml"
     chart.write_text(lacking + "\n")
+    # a log in which the drive reverses: in the fleet's 1 s logs the speed is positive 99.7 % of the time, where
+    # Coulomb friction is a constant torque and an input offset (diagnose's input_offset) explains it as well
+    log = write_log(tmp_path / "A_reversing.csv", seed=10, seconds=3.0)
+    w = np.loadtxt(log, delimiter=",", skiprows=1, usecols=2)
+    assert (w < -0.05).mean() > 0.02 and (w > 0.05).mean() > 0.02
     out = tmp_path / "r.csv"
-    run_batch(load_diagram(str(chart)), fleet["files"][:1], str(out),
-              BatchSettings(identify=FAST.identify, diagnose=True))
+    run_batch(load_diagram(str(chart)), [str(log)], str(out), BatchSettings(identify=FAST.identify, diagnose=True))
     row = read_results(out)[1][0]
     assert "friction" in row["effects"]
 
