@@ -47,15 +47,15 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
 import json  # noqa: E402
-import math  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import numpy as np  # noqa: E402
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+from diagnose_bench import rough_chart  # noqa: E402
 
 from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
 from flowchart2sdnn.diagnose import DiagnoseSettings, diagnose  # noqa: E402
@@ -72,20 +72,6 @@ def record(plant, seconds: float, seed: int, noise: float):
     data = excite(plant, ExcitationSettings(seconds=seconds, seed=seed, noise_std=noise))
     return dataset_from_frame(data, time="time", inputs=list(plant.input_names), outputs=list(plant.output_names),
                               name=f"{plant.name}-seed{seed}-noise{noise:g}")
-
-
-def rough_chart(chart, seed: int):
-    """`chart` with each free parameter's init (the truth) times a factor in [1/2, 2], log-uniform, seeded."""
-    rng = np.random.default_rng(seed)
-    params, factors = [], {}
-    for p in chart.parameters:
-        if p.fixed:
-            params.append(p)
-            continue
-        f = float(np.exp(rng.uniform(-math.log(2), math.log(2))))
-        factors[p.name] = f
-        params.append(dataclasses.replace(p, init=p.init * f))
-    return dataclasses.replace(chart, parameters=tuple(params)), factors
 
 
 def _refused(report: dict) -> str:

@@ -28,15 +28,15 @@ os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")
 
 import argparse  # noqa: E402
 import dataclasses  # noqa: E402
-import math  # noqa: E402
 import sys  # noqa: E402
 import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
-import numpy as np  # noqa: E402
-
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))
+
+from diagnose_bench import rough_chart  # noqa: E402
 
 from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
 from flowchart2sdnn.diagnose import DiagnoseSettings, diagnose  # noqa: E402
@@ -85,20 +85,6 @@ def record(plant, seconds: float, seed: int, noise: float, excitation: tuple = (
                               name=f"{plant.name}-seed{seed}")
 
 
-def rough_chart(chart, truth: dict, seed: int):
-    """`chart` with each free parameter's init at the plant's value (else its own init) times a log-uniform factor
-    in [1/2, 2] (default_rng(seed))."""
-    rng = np.random.default_rng(seed)
-    params = []
-    for p in chart.parameters:
-        if p.fixed:
-            params.append(p)
-            continue
-        f = float(np.exp(rng.uniform(-math.log(2), math.log(2))))
-        params.append(dataclasses.replace(p, init=truth.get(p.name, p.init) * f))
-    return dataclasses.replace(chart, parameters=tuple(params))
-
-
 def _is_damping(name: str) -> bool:
     return name[0] in "db" and (name[1:] == "" or name[1:].isdigit())
 
@@ -124,7 +110,7 @@ def run_one(key: str, seed: int, noise: float, shooting, log: bool) -> dict:
     plant, given = load_diagram(case.plant), load_diagram(case.chart)
     free = {p.name for p in given.parameters if not p.fixed}
     truth = {k: v for k, v in plant.parameter_values().items() if k in free and v}
-    chart = rough_chart(given, truth, seed)
+    chart, _ = rough_chart(given, seed, truth)
     if case.linear:
         truth = {k: truth[k] for k in case.linear}
     train = record(plant, case.train_s, seed, noise, case.excitation)

@@ -2,6 +2,8 @@
 
 from __future__ import annotations
 
+import dataclasses
+import math
 from pathlib import Path
 
 import numpy as np
@@ -30,6 +32,21 @@ def record(plant: Diagram, seconds: float, seed: int, noise: float, name: str | 
     n = len(cols["time"])
     return Dataset(name or f"{plant.name}-seed{seed}", {k: np.asarray(cols[k], dtype=float) for k in keep},
                    np.asarray(cols["time"]), n, plant.sample_time, 0.0, f"seed{seed}", {k: k for k in keep})
+
+
+def rough_chart(chart: Diagram, seed: int, truth: dict | None = None, factor: float = 2.0) -> tuple[Diagram, dict]:
+    """`chart` with each free parameter's init at `truth` (else its own init) times a factor drawn log-uniformly
+    within x/÷`factor` (numpy default_rng(seed)), a user's rough guess; also the factors drawn, by name."""
+    rng = np.random.default_rng(seed)
+    params, factors = [], {}
+    for p in chart.parameters:
+        if p.fixed:
+            params.append(p)
+            continue
+        f = float(np.exp(rng.uniform(-math.log(factor), math.log(factor))))
+        factors[p.name] = f
+        params.append(dataclasses.replace(p, init=((truth or {}).get(p.name) or p.init) * f))
+    return dataclasses.replace(chart, parameters=tuple(params)), factors
 
 
 def simulate(diagram: Diagram, u: np.ndarray) -> np.ndarray:

@@ -11,12 +11,9 @@ the whole record the cogging place is not first; scored on the tracked part it i
 
 from __future__ import annotations
 
-import dataclasses
-import math
-
 import numpy as np
 import pytest
-from diagnose_bench import chart, record
+from diagnose_bench import chart, record, rough_chart
 
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
 from flowchart2sdnn.diagnose.fitting import current_problem, effect_scales, fit_chart
@@ -75,16 +72,7 @@ def test_the_tracked_part_ends_where_a_hand_computed_running_rms_crosses_half_th
 def diverged():
     plant = chart("two_mass_cogging_plant")
     given = chart("two_mass_nominal")
-    truth = plant.parameter_values()
-    rng = np.random.default_rng(3)
-    params = []
-    for p in given.parameters:
-        if p.fixed:
-            params.append(p)
-            continue
-        f = float(np.exp(rng.uniform(-math.log(2), math.log(2))))
-        params.append(dataclasses.replace(p, init=(truth.get(p.name) or p.init) * f))
-    rough = dataclasses.replace(given, parameters=tuple(params))
+    rough, _ = rough_chart(given, 3, plant.parameter_values())
     train = [record(plant, 30.0, 3, NOISE)]
     records = [(record(plant, 3.0, 103, NOISE), 0)]
     fitted = fit_chart(rough, train, records, SETTINGS, SETTINGS.max_iter, 0, "chart")
