@@ -121,7 +121,7 @@ def _prefix_screen(cands: list[Candidate], current: Fitted, problem, train: list
     say(f"score test on the tracked part of the records ({', '.join(map(str, rows))} rows)", None)
     part = screen(cands, built[0], built[1], settings.alignment, settings.seed, settings.top_options)
     picks = _refit_set(part, settings)
-    picks = [s for s in picks if picks and s.candidate.key == picks[0].candidate.key]
+    picks = [s for s in picks if s.candidate.key == picks[0].candidate.key]  # the best place's options
     return rows, (part.seconds, picks)
 
 
