@@ -9,7 +9,7 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
-from diagnose_bench import chart, record
+from diagnose_bench import chart, record, rough_chart
 
 from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS, Scales
@@ -82,6 +82,7 @@ def test_diagnose_finds_the_overflow_of_the_upper_tank_first():
     first = r["rounds"][0]
     assert first["accepted"] and (first["effect"], first["at"]) == ("overflow", "x1dev")
     assert first["label"].startswith("max=")
+    assert first["second_look"] == []  # its refit reached the noise: no more places refitted
     assert first["validation_rms_after"] < first["validation_rms_before"] / 3
     p = {k: v["value"] for k, v in r["final"]["parameters"].items()}
     # the upper level's limit (x10 + L) near the plant's spill level 6 (the plant's spillway lets it rise
@@ -89,3 +90,26 @@ def test_diagnose_finds_the_overflow_of_the_upper_tank_first():
     assert p["x10"] + p["x1dev_max"] == pytest.approx(6.0, rel=0.05)
     for name, truth in (("k1", 0.5), ("k3", 0.4), ("k4", 1.0)):
         assert p[name] == pytest.approx(truth, rel=0.05)
+
+
+def test_a_second_look_refits_the_places_below_the_cut_when_no_refit_nears_the_noise():
+    """Rough chart (x/÷2, seed 2), one-missing bench's level case: the first fit keeps the upper tank below its
+    start, so the spill's place scores 6th; the top 5 refits (an input clip best) stay at 19x the noise, and
+    the next places' refits must be tried before the round decides."""
+    plant = chart("tanks_overflow_plant")
+    truth = {k: v for k, v in plant.parameter_values().items() if k in ("k1", "k3", "k4")}
+    rough, _ = rough_chart(chart("tanks"), 2, truth)
+    train = record(plant, 1200.0, 2, NOISE, **EXCITATION)
+    val = record(plant, 600.0, 102, NOISE, **EXCITATION)
+    without = diagnose(rough, train, [val], DiagnoseSettings(rounds=1, second_look=False)).report
+    first = without["rounds"][0]
+    assert (first["effect"], first["at"]) != ("overflow", "x1dev") and first["second_look"] == []
+    r = diagnose(rough, train, [val], DiagnoseSettings(rounds=1)).report
+    first = r["rounds"][0]
+    assert "overflow at x1dev" in " ".join(first["second_look"])
+    assert first["accepted"] and (first["effect"], first["at"]) == ("overflow", "x1dev")
+    assert first["validation_rms_after"] < first["validation_rms_before"] / 3
+    p = {k: v["value"] for k, v in r["final"]["parameters"].items()}
+    for name, value in truth.items():
+        assert p[name] == pytest.approx(value, rel=0.05)
+

@@ -82,6 +82,8 @@ def _int_list(text: str) -> tuple[int, ...]:
                    "chart as given; 0: off.")
 @click.option("--top", type=click.IntRange(min=1), default=5, show_default=True,
               help="Places refitted per round (the best option of each).")
+@click.option("--second-look/--no-second-look", default=True, show_default=True,
+              help="When no refit of the --top places comes within 5x the noise, refit the next --top places too.")
 @click.option("--criterion", type=click.Choice(["aic", "bic"]), default="bic", show_default=True,
               help="Information criterion that must fall for an effect to be accepted.")
 @click.option("--min-gain", type=click.FloatRange(0, 1, max_open=True), default=0.02, show_default=True,
@@ -112,7 +114,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 @executor_options("the candidate refits")
 @handle_errors
 def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
-             refit_iter, max_iter, horizon, top, criterion, min_gain, spread_z, alpha, dead_time_max, harmonics, init_window,
+             refit_iter, max_iter, horizon, top, second_look, criterion, min_gain, spread_z, alpha, dead_time_max, harmonics, init_window,
              shooting, allow_unconverged, alignment, substeps, mapping, units, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
     """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
     chart, refit, and report the error before and after."""
@@ -154,7 +156,7 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     train = [windowed(read_csv(d, cols, maps, diagram.sample_time, scale=scales)) for d in data]
     val = [read_csv(v, cols, maps, diagram.sample_time, scale=scales) for v in validation]
     with settings_usage():
-        settings = DiagnoseSettings(rounds=rounds, top=top, refit_iter=refit_iter, max_iter=max_iter,
+        settings = DiagnoseSettings(rounds=rounds, top=top, second_look=second_look, refit_iter=refit_iter, max_iter=max_iter,
                                     alpha=alpha, criterion=criterion, min_gain=min_gain, spread_z=spread_z,
                                     alignment=alignment,
                                     seed=seed, split=split, horizon=horizon,

@@ -26,7 +26,8 @@ from .effects import Scales
 from .residual import signal_correlation, whiteness
 
 __all__ = ["DiagnoseSettings", "Fitted", "fit_chart", "with_floor", "fit_growing", "horizons", "current_problem", "effect_scales",
-           "residual_analysis", "DEFAULT_SPLIT", "VALIDATION_SEGMENTS", "gain_spread", "unpredictable"]
+           "residual_analysis", "DEFAULT_SPLIT", "VALIDATION_SEGMENTS", "gain_spread", "unpredictable",
+           "far_above_noise"]
 
 DEFAULT_SPLIT = 0.7
 #: The validation records are cut into about this many consecutive parts in all (at least 2 per record): the
@@ -82,6 +83,9 @@ class DiagnoseSettings:
     # multiple shooting (identify.shooting) for the full fits (the chart as given, a finished control or
     # candidate: max_iter iterations); the brief refits start next to a fit and stay single shooting
     shooting: str | int = "off"
+    # when no refit of the `top` places comes within SECOND_LOOK x the noise (the chart still misses most of what
+    # the records hold), the next `top` significant places are refitted too before the round decides (False: off)
+    second_look: bool = True
 
     def __post_init__(self) -> None:
         if self.rounds < 0:
@@ -296,10 +300,26 @@ def unpredictable(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettin
         problem = current_problem(fitted, train, settings)
     except (SdnnError, ValueError, KeyError):
         return False
-    m = sum(s.targets.size for s in problem.segments)
-    if not fitted.cost / max(1, m) > 0.5 * NOISE_MARGIN ** 2 * noise_level(problem):
+    if not _above_noise(fitted, problem, NOISE_MARGIN):
         return False
     return choose_shooting(problem, problem.compiled.theta0()).peak > SUSPECT_PEAK
+
+
+def far_above_noise(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings, ratio: float) -> bool:
+    """Whether the training residual RMS of `fitted` exceeds `ratio` x the noise read off the records' second
+    differences (:func:`~flowchart2sdnn.identify.shooting.noise_level`); False where that cannot be told."""
+    if not math.isfinite(fitted.cost) or getattr(fitted.identification, "problem", None) is None:
+        return False
+    try:
+        problem = current_problem(fitted, train, settings)
+    except (SdnnError, ValueError, KeyError):
+        return False
+    return _above_noise(fitted, problem, ratio)
+
+
+def _above_noise(fitted: Fitted, problem: Problem, ratio: float) -> bool:
+    m = sum(s.targets.size for s in problem.segments)
+    return fitted.cost / max(1, m) > 0.5 * ratio ** 2 * noise_level(problem)  # cost = SSE / 2
 
 
 def current_problem(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> Problem:

@@ -97,6 +97,9 @@ def format_report(report: dict, limit: int = 10) -> str:
                 added = ", ".join(r.get("score_rows_added") or []) or "nothing new"
                 out.append(f"round {r['round']}: the fit loses the record; also scored on the part it follows "
                            f"({', '.join(map(str, r['score_rows']))} rows), which added to the refits: {added}")
+            if r.get("second_look"):
+                out.append(f"round {r['round']}: no refit came near the noise; also refitted: "
+                           + ", ".join(r["second_look"]))
             if not r["accepted"]:
                 out.append(f"round {r['round']}: not accepted - {r['reason']}")
     accepted = report.get("accepted") or []
