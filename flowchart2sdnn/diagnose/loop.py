@@ -34,11 +34,12 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
+from ..identify.run import with_floor_bias
 from ..strictjson import finite_or_none
 from .effects import BUILTIN_EFFECTS, Effect, Scales
 from .entries import round_entry as _round_entry
@@ -402,6 +403,9 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             raise
         stop_reason, interrupted = "interrupted", True
 
+    if settings.final_bias and not interrupted:
+        say("the final fit's discretization bias", None)
+        current = replace(current, identification=with_floor_bias(current.identification, train))
     say("residual analysis", None)
     report = {
         "format": REPORT_FORMAT,
