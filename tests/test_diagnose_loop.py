@@ -69,7 +69,7 @@ def test_the_final_fit_reports_the_discretizations_bias(friction_case):
     """REPORT.json's `final` carries identify's bias analysis: ci95 widened by |beta| around the noise's."""
     final = friction_case.report["final"]
     beta = final["discretization"]["bias"]["beta"]
-    assert "m" in beta
+    assert "m" in beta and friction_case.report["timing"]["final_bias"] > 0
     for name, b in beta.items():
         (lo, hi), (nlo, nhi) = final["parameters"][name]["ci95"], final["parameters"][name]["ci95_noise"]
         assert lo == pytest.approx(nlo - abs(b)) and hi == pytest.approx(nhi + abs(b))

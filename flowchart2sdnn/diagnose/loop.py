@@ -405,7 +405,9 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
 
     if settings.final_bias and not interrupted:
         say("the final fit's discretization bias", None)
+        t_bias = time.perf_counter()
         current = replace(current, identification=with_floor_bias(current.identification, train))
+        timing["final_bias"] = time.perf_counter() - t_bias
     say("residual analysis", None)
     report = {
         "format": REPORT_FORMAT,
