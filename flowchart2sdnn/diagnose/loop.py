@@ -403,7 +403,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             raise
         stop_reason, interrupted = "interrupted", True
 
-    if settings.final_bias and not interrupted:
+    if settings.final_bias and not interrupted and math.isfinite(current.cost):
         say("the final fit's discretization bias", None)
         t_bias = time.perf_counter()
         current = replace(current, identification=with_floor_bias(current.identification, train))
