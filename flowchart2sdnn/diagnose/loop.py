@@ -406,7 +406,12 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
     if settings.final_bias and not interrupted and math.isfinite(current.cost):
         say("the final fit's discretization bias", None)
         t_bias = time.perf_counter()
-        current = replace(current, identification=with_floor_bias(current.identification, train))
+        try:
+            current = replace(current, identification=with_floor_bias(current.identification, train))
+        except (KeyboardInterrupt, SystemError) as exc:  # Ctrl-C: the traced result stands without the analysis
+            if isinstance(exc, SystemError) and not isinstance(exc.__cause__ or exc.__context__, KeyboardInterrupt):
+                raise
+            stop_reason, interrupted = "interrupted", True
         timing["final_bias"] = time.perf_counter() - t_bias
     say("residual analysis", None)
     report = {
