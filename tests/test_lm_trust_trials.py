@@ -76,28 +76,27 @@ def _rosenbrock_logged(trial_jacobian: bool):
     return r, calls, accepted
 
 
-def test_a_first_trial_much_longer_than_the_last_step_is_simulated_without_its_jacobian():
+def test_a_trial_much_longer_than_the_last_step_is_simulated_without_its_jacobian():
+    """With the trust radius every trial, first of its iteration or after a refusal, is simulated with its Jacobian
+    unless its step is more than LONG_STEP times the last accepted one."""
     r, calls, accepted = _rosenbrock_logged(True)
     np.testing.assert_allclose(r.x, [1.0, 1.0], atol=1e-8)
     points = [calls[0][1]] + accepted  # the start, then every accepted point in order
-    k, first, long_ones, i = 0, True, 0, 1
+    k, seen, i = 0, {"long": 0, "short": 0, "refused": 0}, 1
     while i < len(calls):
         kind, x = calls[i]
         if kind == "res" and i + 1 < len(calls) and calls[i + 1][0] == "fun" and np.array_equal(calls[i + 1][1], x):
             i += 1  # a residual-first trial accepted: its Jacobian simulated at the same point
-        if first:  # the first trial from points[k]: with its Jacobian unless 1.5 times longer than the last step
-            last = np.linalg.norm(points[k] - points[k - 1]) if k > 0 else math.inf
-            long = np.linalg.norm(x - points[k]) > lm.LONG_STEP * last
-            long_ones += long
-            assert kind == ("res" if long else "fun"), f"first trial {i} from point {k}"
-        elif kind == "fun" and calls[i - 1][0] != "res":
-            raise AssertionError(f"a later trial {i} simulated with its Jacobian")
+        last = np.linalg.norm(points[k] - points[k - 1]) if k > 0 else math.inf
+        long = np.linalg.norm(x - points[k]) > lm.LONG_STEP * last
+        seen["long" if long else "short"] += 1
+        assert kind == ("res" if long else "fun"), f"trial {i} from point {k}"
         if k + 1 < len(points) and np.array_equal(x, points[k + 1]):
-            k, first = k + 1, True
+            k += 1
         else:
-            first = False
+            seen["refused"] += 1
         i += 1
-    assert long_ones >= 1  # the run exercised the rule
+    assert k == len(points) - 1 and min(seen.values()) >= 1, seen  # the run exercised every case
 
 
 def test_the_trial_jacobian_rule_changes_the_count_of_simulations_not_the_iterates():

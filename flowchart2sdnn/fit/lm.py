@@ -88,13 +88,14 @@ class LMOptions:
     a refusal or a poor gain ratio (< 0.25), twice the step after a good one (> 0.75); ``mu_history`` then holds
     the radius. Where mu is small beside JᵀJ, raising it barely shortens the step, so Nielsen's x2, x4, ... take
     several refused trials to act; the radius acts at once. A trust-radius fit also ends as converged
-    ("small_cost_change") when the Gauss-Newton step fits the radius and predicts a decrease below ``COST_ROUNDING``
-    of the cost, which the cost cannot show. ``trial_jacobian = True`` simulates the first trial of an iteration
-    with its Jacobian (``fun``) instead of ``residual`` alone: accepted, it needs no second simulation; later
-    trials of the iteration (after a refusal), and a first trial more than ``LONG_STEP`` times longer (scaled)
-    than the last accepted step, stay residual-only. Either way the iterates are the same; only the count of
-    simulations differs. ``bound_width`` > 0 makes each one-sided
-    bound's transform bend within that fraction of the start's distance from the bound
+    ("small_cost_change") when the Gauss-Newton step fits the radius, or a trial follows a refusal, and predicts a
+    decrease below ``COST_ROUNDING`` of the cost, which the cost cannot show. ``trial_jacobian = True``
+    simulates the first trial of an iteration with its Jacobian (``fun``) instead of ``residual`` alone:
+    accepted, it needs no second simulation; later trials of the iteration (after a refusal) stay residual-only,
+    except with the trust radius (a quarter of the refused step, mostly accepted), and so does any trial more
+    than ``LONG_STEP`` times longer (scaled) than the last accepted step. Either way the iterates are the same;
+    only the count of simulations differs. ``bound_width`` > 0 makes each one-sided bound's transform bend within
+    that fraction of the start's distance from the bound
     (:meth:`.transforms.Bounds.with_width`); 0 keeps the unit transform.
 
     ``bounds = "box"`` handles the bounds without a transform: steps in the physical (column-scaled) coordinates,
@@ -680,17 +681,20 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
         tiny = float(np.linalg.norm(x_t - point.x)) <= opt.min_rel_step * (opt.min_rel_step + x_norm)
         step_norm = float(np.linalg.norm(du if scale is None else du * scale))
         predicted = _predicted_decrease(du, g, Ju) if opt.damping in ("nielsen", "trust") else math.nan
-        if radius is not None and tries == 0 and mu == 0.0 and predicted <= COST_ROUNDING * point.cost:
-            # the Gauss-Newton step fits the radius and its model decrease, the largest any step of this model
-            # has, is below what the cost can show: converged (simulating it, then ever shorter steps, only
-            # draws rounding; the bench's L = 100 run refused 14 such trials after converging)
+        if radius is not None and (tries > 0 or mu == 0.0) and predicted <= COST_ROUNDING * point.cost:
+            # converged: the Gauss-Newton step fits the radius and its model decrease, the largest any step of this
+            # model has, is below what the cost can show; or a longer step was refused and this shorter one's
+            # is. Simulating it, then ever shorter steps, only draws rounding (the bench's L = 100 run refused
+            # 14 such trials after converging)
             return "small_cost_change", None, radius, tiny, math.nan, math.nan
-        # right after an accepted step a trial is likely accepted too: simulate it with its Jacobian at once
-        # (trial_jacobian) instead of a residual now and the Jacobian's simulation again once accepted; not a
-        # step much longer than the last accepted one (the radius doubled after a good gain ratio, or a longer
-        # Gauss-Newton step), which leaves where the model was last confirmed and is refused more often than
-        # not (bench_shooting_iteration: 6 of 9 such trials refused), a refused Jacobian costing 2-3 residuals
-        with_jac = opt.trial_jacobian and tries == 0 and not step_norm > LONG_STEP * last_step
+        # a trial likely accepted is simulated with its Jacobian at once (trial_jacobian) instead of a residual now
+        # and the Jacobian's simulation again once accepted: the first trial of an iteration, and with the trust
+        # radius a trial after a refusal too (a quarter of the refused step: 5 of 5 accepted on the shooting
+        # bench, L = 2500); not a step much longer than the last accepted one (the radius doubled after a good
+        # gain ratio, or a longer Gauss-Newton step), which leaves where the model was last confirmed and was
+        # refused more often than not (bench_shooting_iteration: 6 of 9), a refused Jacobian costing 2-3 residuals
+        with_jac = (opt.trial_jacobian and (tries == 0 or radius is not None)
+                    and not step_norm > LONG_STEP * last_step)
         trial = _try(fun, None if with_jac else residual, guard, u_t, x_t, point.cost, counters)
         if trial is not None and opt.damping in ("nielsen", "trust"):
             # a model that predicted no decrease where the cost fell (rounding, or a geodesic bend) counts as good
@@ -716,8 +720,8 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
     return "max_mu_tries", None, mu, False, math.nan, math.nan
 
 
-#: A first trial whose scaled step is longer than this many times the last accepted step's is simulated without
-#: its Jacobian even with ``trial_jacobian`` (the radius doubles after a good gain ratio: such a step is twice).
+#: A trial whose scaled step is longer than this many times the last accepted step's is simulated without its
+#: Jacobian even with ``trial_jacobian`` (the radius doubles after a good gain ratio: such a step is twice).
 LONG_STEP = 1.5
 #: The trust radius's fit ends as converged when the Gauss-Newton step's predicted decrease is below this fraction
 #: of the cost: a change the cost cannot show (on the two-mass bench, 50 000 residuals, trials at the minimum
