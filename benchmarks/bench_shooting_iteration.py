@@ -49,8 +49,9 @@ iteration (one Jacobian, two residuals): 1.21-1.30x at L = 100, 1.06-1.16x at L 
 The rough-start bench (bench_rough_init.py, coulomb, 30 s, draws 0-7) takes the same iterates and ends at the same
 minima (costs equal to 7 digits; one fewer iteration on 6 draws: the rounding stop) with 143 Jacobian and 59
 residual simulations against 165 and 29 before (166 Jacobian-equivalents against 176, a residual costing 0.39 of a
-Jacobian); timed, 0.95x trf's seconds per draw (0.62-1.57; sums 1.01x) against 0.91x (0.77-1.60; sums 1.03x) for
-the code before, run right after it (load 4-5: the medians of eight draws move by that much between runs).
+Jacobian); timed, draw by draw alternating with the code before (one process per draw and tree, load 3.5-4): 0.91x
+trf's seconds per draw (0.50-1.55) against 0.98x (0.74-1.52), a lower ratio on 7 of 8 draws (draw 6: 5.8 s in both),
+sums of seconds 0.95x and 1.12x trf's.
 
 Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_shooting_iteration.py [--seconds 25] [--length 100 --length
 500 --length 2500] [--iterations 5] [--repeat 3] [--threads 2]``.

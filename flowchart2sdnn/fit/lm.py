@@ -91,12 +91,12 @@ class LMOptions:
     ("small_cost_change") when the Gauss-Newton step fits the radius, or a trial follows a refusal, and predicts a
     decrease below ``COST_ROUNDING`` of the cost, which the cost cannot show. ``trial_jacobian = True``
     simulates the first trial of an iteration with its Jacobian (``fun``) instead of ``residual`` alone:
-    accepted, it needs no second simulation; later trials of the iteration (after a refusal) stay residual-only,
-    except with the trust radius (a quarter of the refused step, mostly accepted), and so does any trial more
-    than ``LONG_STEP`` times longer (scaled) than the last accepted step. Either way the iterates are the same;
-    only the count of simulations differs. ``bound_width`` > 0 makes each one-sided bound's transform bend within
-    that fraction of the start's distance from the bound
-    (:meth:`.transforms.Bounds.with_width`); 0 keeps the unit transform.
+    accepted, it needs no second simulation; later trials of the iteration (after a refusal) stay residual-only.
+    With the trust radius every trial is simulated with its Jacobian (after a refusal the step is a quarter of the
+    refused one, mostly accepted) except one more than ``LONG_STEP`` times longer (scaled) than the last accepted
+    step (mostly refused). Either way the iterates are the same; only the count of simulations differs.
+    ``bound_width`` > 0 makes each one-sided bound's transform bend within that fraction of the start's distance
+    from the bound (:meth:`.transforms.Bounds.with_width`); 0 keeps the unit transform.
 
     ``bounds = "box"`` handles the bounds without a transform: steps in the physical (column-scaled) coordinates,
     each component held within 0.995 of its room to the bound it moves towards and the others re-solved around
@@ -721,8 +721,7 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
         # bench, L = 2500); not a step much longer than the last accepted one (the radius doubled after a good
         # gain ratio, or a longer Gauss-Newton step), which leaves where the model was last confirmed and was
         # refused more often than not (bench_shooting_iteration: 6 of 9), a refused Jacobian costing 2-3 residuals
-        with_jac = (opt.trial_jacobian and (tries == 0 or radius is not None)
-                    and not step_norm > LONG_STEP * last_step)
+        with_jac = opt.trial_jacobian and (tries == 0 if radius is None else not step_norm > LONG_STEP * last_step)
         trial = _try(fun, None if with_jac else residual, guard, u_t, x_t, point.cost, counters)
         if trial is not None and opt.damping in ("nielsen", "trust"):
             # a model that predicted no decrease where the cost fell (rounding, or a geodesic bend) counts as good
@@ -748,8 +747,9 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
     return "max_mu_tries", None, mu, False, math.nan, math.nan
 
 
-#: A trial whose scaled step is longer than this many times the last accepted step's is simulated without its
-#: Jacobian even with ``trial_jacobian`` (the radius doubles after a good gain ratio: such a step is twice).
+#: A trust-radius trial whose scaled step is longer than this many times the last accepted step's is simulated
+#: without its Jacobian even with ``trial_jacobian`` (the radius doubles after a good gain ratio: such a step is
+#: twice).
 LONG_STEP = 1.5
 #: The trust radius's fit ends as converged when the Gauss-Newton step's predicted decrease is below this fraction
 #: of the cost: a change the cost cannot show (on the two-mass bench, 50 000 residuals, trials at the minimum
