@@ -37,14 +37,15 @@ with the same iterates: a trust-radius fit stops as converged when the Gauss-New
 trial follows a refusal) and predicts a decrease below 1e-12 of the cost (COST_ROUNDING); a trial more than 1.5x
 the last accepted step (LONG_STEP: the doubled radius) is simulated without its Jacobian (6 of 9 such trials were
 refused), a trial after a refusal (a quarter of the refused step: 5 of 5 accepted) with it; JᵀJ of a CSR Jacobian
-takes its wide columns by BLAS (4.8 ms against 8.3 at 250 segments). Then (three runs, load 3.5-6, --repeat 3; one
+takes its wide columns by BLAS (4.8 ms against 8.3 at 250 segments). Then (four runs, load 3.5-6, --repeat 3; one
 thread, in brackets 2 threads, slower than one on a machine that busy): --iterations 5: single shooting 6 Jacobians
-and 1 residual; L = 100 1.28-1.38x (6 Jacobians, no residual; 1.32-1.61x); L = 500 1.29-1.34x (6 and 2;
-1.31-1.55x); L = 2500 1.36-1.43x (6 and 4; 1.47-1.48x). --iterations 20 (every run converges on its own: single
-shooting after 10 iterations, 11 Jacobians, 1 residual): L = 100 1.46-1.49x (5 iterations, 6 Jacobians: the start's
-Jacobian is spread over half as many iterations as single shooting's; 1.51-1.59x); L = 500 1.28-1.30x (9
-iterations, 10 and 2; 1.40-1.50x); L = 2500 1.34-1.38x (13 iterations, 14 and 8; 1.40-1.80x). The work of an
-iteration (one Jacobian, two residuals): 1.21-1.30x at L = 100, 1.06-1.16x at L = 500 and 2500.
+and 1 residual; L = 100 1.27-1.38x (6 Jacobians, no residual; 1.32-1.61x); L = 500 1.29-1.34x (6 and 2;
+1.31-1.55x); L = 2500 1.36-1.43x (6 and 4; 1.47-1.56x). --iterations 20 (every run converges on its own: single
+shooting after 10 iterations, 11 Jacobians, 1 residual): L = 100 1.46-1.58x (1.46, 1.49, 1.48, 1.58: at the edge; 5
+iterations, 6 Jacobians and no residual, so the start's Jacobian weighs twice as much per iteration as in single
+shooting's 10, and each Jacobian costs 1.2x: the free start's sensitivity column, the CSR products; 1.51-1.59x); L
+= 500 1.28-1.40x (9 iterations, 10 and 2; 1.40-1.50x); L = 2500 1.34-1.38x (13 iterations, 14 and 8; 1.40-1.80x).
+The work of an iteration (one Jacobian, two residuals): 1.18-1.30x at L = 100, 1.06-1.16x at L = 500 and 2500.
 
 The rough-start bench (bench_rough_init.py, coulomb, 30 s, draws 0-7) takes the same iterates and ends at the same
 minima (costs equal to 7 digits; one fewer iteration on 6 draws: the rounding stop) with 143 Jacobian and 59
