@@ -24,6 +24,36 @@ ratio does not. Again 27 Nov (merged, loaded, --repeat 3): L = 100 1.08x, L = 50
 16 residuals; L = 2500 after 17) L = 2500 1.21-1.34x (work 1.09-1.14x), L = 100 2.6x (6 iterations, 14 refused
 trials).
 
+Why the segmented fits refused more trials (per-trial traces, 27 Nov, the branch shootiter): before the fits
+converge, L = 100 and L = 500 refuse no trial and single shooting one; L = 2500 refuses 5 (3 within 5 iterations).
+Its first two steps have poor gain ratios (0.43, 0.28) and triple the shaft damping d; coming back, each good gain
+ratio (1.1-1.3) doubles the radius, the doubled step drives d 66-99.5 % of the way to its bound and is refused, the
+radius becomes a quarter of that step, and again. Not the free starts: the first radius computed from theta alone,
+or one column scale shared by all free starts, give the same trace; the continuity weight is constant within a
+stage (and 1 here); a radius grown 1.5x instead of 2x refuses 3 instead of 5 but changes single shooting's path too
+(not kept). After converging (convergence tests off) both runs refused trial after trial whose cost changed by
+rounding only (L = 100: 14 after 5 iterations), the first of each with its Jacobian: the 2.6x. Fixed in fit.lm,
+with the same iterates: a trust-radius fit stops as converged when the Gauss-Newton step fits the radius (or a
+trial follows a refusal) and predicts a decrease below 1e-12 of the cost (COST_ROUNDING); a trial more than 1.5x
+the last accepted step (LONG_STEP: the doubled radius) is simulated without its Jacobian (6 of 9 such trials were
+refused), a trial after a refusal (a quarter of the refused step: 5 of 5 accepted) with it; JᵀJ of a CSR Jacobian
+takes its wide columns by BLAS (4.8 ms against 8.3 at 250 segments). Then (four runs, load 3.5-6, --repeat 3; one
+thread, in brackets 2 threads, slower than one on a machine that busy): --iterations 5: single shooting 6 Jacobians
+and 1 residual; L = 100 1.27-1.38x (6 Jacobians, no residual; 1.32-1.61x); L = 500 1.29-1.34x (6 and 2;
+1.31-1.55x); L = 2500 1.36-1.43x (6 and 4; 1.47-1.56x). --iterations 20 (every run converges on its own: single
+shooting after 10 iterations, 11 Jacobians, 1 residual): L = 100 1.46-1.58x (1.46, 1.49, 1.48, 1.58: at the edge; 5
+iterations, 6 Jacobians and no residual, so the start's Jacobian weighs twice as much per iteration as in single
+shooting's 10, and each Jacobian costs 1.2x: the free start's sensitivity column, the CSR products; 1.51-1.59x); L
+= 500 1.28-1.40x (9 iterations, 10 and 2; 1.40-1.50x); L = 2500 1.34-1.38x (13 iterations, 14 and 8; 1.40-1.80x).
+The work of an iteration (one Jacobian, two residuals): 1.18-1.30x at L = 100, 1.06-1.16x at L = 500 and 2500.
+
+The rough-start bench (bench_rough_init.py, coulomb, 30 s, draws 0-7) takes the same iterates and ends at the same
+minima (costs equal to 7 digits; one fewer iteration on 6 draws: the rounding stop) with 143 Jacobian and 59
+residual simulations against 165 and 29 before (166 Jacobian-equivalents against 176, a residual costing 0.39 of a
+Jacobian); timed, draw by draw alternating with the code before (one process per draw and tree, load 3.5-4): 0.91x
+trf's seconds per draw (0.50-1.55) against 0.98x (0.74-1.52), a lower ratio on 7 of 8 draws (draw 6: 5.8 s in both),
+sums of seconds 0.95x and 1.12x trf's.
+
 Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_shooting_iteration.py [--seconds 25] [--length 100 --length
 500 --length 2500] [--iterations 5] [--repeat 3] [--threads 2]``.
 """
@@ -110,7 +140,7 @@ def main() -> None:
     work = per_evaluation(problem.fun, problem.residual, theta0, 3 * args.repeat)
     print(f"{'single shooting':>32}: {base * 1e3:8.1f} ms per iteration   ratio 1.00   ({counts}); "
           f"Jacobian + 2 residuals {work * 1e3:.1f} ms, ratio 1.00")
-    for L, threads in [(L, t) for L in lengths for t in (1, args.threads) if t == 1 or args.threads > 1]:
+    for L, threads in [(L, t) for L in lengths for t in ((1, args.threads) if args.threads > 1 else (1,))]:
         seg = Segmented(problem, L, 1.0, threads=threads)
         seg.scale = _state_scale(problem, theta0, seg.free)
         seg.row_weight = seg.weight * np.sqrt(seg.length) / seg.scale

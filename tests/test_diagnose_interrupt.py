@@ -50,3 +50,18 @@ def test_other_system_errors_are_not_taken_for_ctrl_c(monkeypatch):
     monkeypatch.setattr(loop, "screen", broken)
     with pytest.raises(SystemError, match="a real bug"):
         diagnose(chart("one_mass"), train, [], DiagnoseSettings(rounds=1), [BUILTIN_EFFECTS["friction"]])
+
+
+def test_ctrl_c_in_the_final_bias_analysis_keeps_the_traced_result(monkeypatch):
+    plant = chart("one_mass_friction_plant")
+    train = record(plant, 3.0, 5, 0.02, **EXCITATION)
+    val = record(plant, 2.0, 6, 0.02, **EXCITATION)
+
+    def interrupted_bias(*args, **kwargs):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(loop, "with_floor_bias", interrupted_bias)
+    r = diagnose(chart("one_mass"), train, [val], DiagnoseSettings(rounds=1), [BUILTIN_EFFECTS["friction"]]).report
+    assert r["interrupted"] is True and r["stop"] == "interrupted"
+    assert [a["effect"] for a in r["accepted"]] == ["friction"]  # what was traced stands
+    assert "bias" not in r["final"]["discretization"]

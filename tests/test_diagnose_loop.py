@@ -65,6 +65,16 @@ def test_the_report_follows_the_contract_and_is_strict_json(friction_case):
     assert refitted and all(c["achieved_decrease"] is not None for c in refitted)
 
 
+def test_the_final_fit_reports_the_discretizations_bias(friction_case):
+    """REPORT.json's `final` carries identify's bias analysis: ci95 widened by |beta| around the noise's."""
+    final = friction_case.report["final"]
+    beta = final["discretization"]["bias"]["beta"]
+    assert "m" in beta and friction_case.report["timing"]["final_bias"] > 0
+    for name, b in beta.items():
+        (lo, hi), (nlo, nhi) = final["parameters"][name]["ci95"], final["parameters"][name]["ci95_noise"]
+        assert lo == pytest.approx(nlo - abs(b)) and hi == pytest.approx(nhi + abs(b))
+
+
 def test_the_input_chart_is_not_modified(friction_case):
     assert "fric_v" not in chart("one_mass").block_names
     assert friction_case.nominal.diagram.block_names == chart("one_mass").block_names

@@ -20,6 +20,7 @@ import flowchart2sdnn as sd
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.identify.document import from_document
+from flowchart2sdnn.identify.run import with_floor_bias
 from flowchart2sdnn.identify.summary import format_result
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
@@ -83,6 +84,24 @@ def test_without_floor_bias_the_interval_is_the_noise_alone(noisy):
     assert "bias" not in fit.extra["discretization"]
     assert all(e.ci95 == e.ci95_noise for e in fit.parameters.values())
     assert "discretization bias" not in format_result(fit)
+
+
+def test_the_analysis_added_afterwards_is_identifys_own_at_the_same_point(noisy):
+    """with_floor_bias (diagnose's final fit, made with floor_bias off): the point stays, the bias, the widened
+    intervals and the warning are what identify's default run reports (N = 1: beta several standard errors)."""
+    chart = dataclasses.replace(PLANT, substeps=1, delays="torques")
+    plain = sd.identify(chart, noisy, max_iter=50, floor_bias=False)
+    added = with_floor_bias(plain, [noisy])
+    default = sd.identify(chart, noisy, max_iter=50)
+    assert added.values == plain.values == default.values
+    beta = added.extra["discretization"]["bias"]["beta"]
+    assert beta == pytest.approx(default.extra["discretization"]["bias"]["beta"], rel=1e-9)
+    for name, est in added.parameters.items():
+        assert est.ci95_noise == plain.parameters[name].ci95
+        assert est.ci95 == pytest.approx(default.parameters[name].ci95, rel=1e-9)
+        assert est.ci95[1] - est.ci95[0] == pytest.approx(est.ci95_noise[1] - est.ci95_noise[0] + 2 * abs(beta[name]))
+    assert [w for w in added.warnings if "reflect the noise only" in w]
+    assert added.settings.floor_bias and with_floor_bias(added, [noisy]) is added  # done once
 
 
 def test_bias_skips_cleanly_where_the_oracle_cannot_run(noisy, monkeypatch):

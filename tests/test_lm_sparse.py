@@ -55,3 +55,21 @@ def test_a_sparse_jacobian_with_nan_is_a_divergence():
         return e, j
     r = levenberg_marquardt(fun, START, ["a1", "b1", "a2", "b2"], options=LMOptions(max_iter=5))
     assert r.status == "diverged_at_start"
+
+
+@pytest.mark.parametrize("order", ["wide first", "shuffled"])
+def test_the_gram_of_a_partly_wide_sparse_jacobian_is_numpys(order):
+    """fit.lm._gram splits a CSR Jacobian into its wide columns (nonzero in most rows: a multiple-shooting fit's
+    parameters) and the rest (one short block per segment's free start); oracle: numpy's JᵀJ of the dense
+    matrix, with the wide columns first (slices) or scattered among the others (index lists)."""
+    from flowchart2sdnn.fit.lm import _gram
+
+    rng = np.random.default_rng(4)
+    rows, wide, blocks = 600, 3, 20
+    dense = np.zeros((rows, wide + blocks))
+    dense[:, :wide] = rng.normal(size=(rows, wide))
+    for b in range(blocks):  # block b's rows only see its own column (and the wide ones)
+        dense[b * 30:(b + 1) * 30, wide + b] = rng.normal(size=30)
+    if order == "shuffled":
+        dense = dense[:, rng.permutation(dense.shape[1])]
+    np.testing.assert_allclose(_gram(sparse.csr_matrix(dense)), dense.T @ dense, rtol=1e-12, atol=1e-12)

@@ -86,6 +86,11 @@ class DiagnoseSettings:
     # when no refit of the `top` places comes within SECOND_LOOK x the noise (the chart still misses most of what
     # the records hold), the next `top` significant places are refitted too before the round decides (False: off)
     second_look: bool = True
+    # the final fit's discretization-bias analysis (identify.floorbias, identify's default; the fits while tracing
+    # skip it): REPORT.json's `final` then widens ci95 by the shift the network's step error causes. Without it
+    # the three-mass backlash bench's final b1, b2 read +12 %, -21 % with noise-only intervals excluding the truth
+    # (seed 2; the shift alone +7.6 %, -16 %: docs/diagnose.md)
+    final_bias: bool = True
 
     def __post_init__(self) -> None:
         if self.rounds < 0:

@@ -34,11 +34,12 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
+from ..identify.run import with_floor_bias
 from ..strictjson import finite_or_none
 from .effects import BUILTIN_EFFECTS, Effect, Scales
 from .entries import round_entry as _round_entry
@@ -438,6 +439,16 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             raise
         stop_reason, interrupted = "interrupted", True
 
+    if settings.final_bias and not interrupted and math.isfinite(current.cost):
+        say("the final fit's discretization bias", None)
+        t_bias = time.perf_counter()
+        try:
+            current = replace(current, identification=with_floor_bias(current.identification, train))
+        except (KeyboardInterrupt, SystemError) as exc:  # Ctrl-C: the traced result stands without the analysis
+            if isinstance(exc, SystemError) and not isinstance(exc.__cause__ or exc.__context__, KeyboardInterrupt):
+                raise
+            stop_reason, interrupted = "interrupted", True
+        timing["final_bias"] = time.perf_counter() - t_bias
     say("residual analysis", None)
     report = {
         "format": REPORT_FORMAT,

@@ -56,7 +56,7 @@ from .shootauto import SUSPECT_PEAK, chaotic_at, choose_shooting, second_look
 from .shooting import kept_stage
 from .workers import fit_start, fit_task, quasi_online_start, run_quasi_online_start, run_start
 
-__all__ = ["IdentifySettings", "Identification", "identify", "lm_options"]
+__all__ = ["IdentifySettings", "Identification", "identify", "lm_options", "with_floor_bias"]
 
 _ONLINE_COST = "mean window cost over the last K steps of each quasi-online run"
 
@@ -218,6 +218,30 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
                **({"initial_states": {"validation": state.to_dict()}} if state is not None else {}),
                **({"parameters_per_record": per_record} if per_record else {})},
     )
+
+
+def with_floor_bias(ident: Identification, train: Sequence[Dataset]) -> Identification:
+    """`ident` (an offline fit made with ``floor_bias`` off) with the discretization-bias analysis identify runs by
+    default (:func:`~flowchart2sdnn.identify.floorbias.estimate_floor_bias`) at its point, which stays as it is:
+    RESULT.json's `discretization.bias`, ci95 widened by |beta| (ci95_noise unchanged) and the warning naming
+    the parameters shifted by more than half a standard error. `train`: the records `ident` was fitted on, in
+    order. Unchanged where the analysis does not apply (no offline fit, or already done)."""
+    disc = dict(ident.extra.get("discretization") or {})
+    problem = ident.problem
+    if problem is None or ident.x is None or ident.chart is None or ident.lm is None or "bias" in disc:
+        return ident
+    free = {n: e for n, e in ident.parameters.items() if not e.fixed and n in problem.names}
+    lower, upper = problem.bounds()
+    disc["bias"] = estimate_floor_bias(problem, ident.chart, ident.x, list(train), lower, upper,
+                                       lm_options(ident.settings, problem),
+                                       {n: (e.value, e.stderr, e.ci95) for n, e in free.items()})
+    parameters = dict(ident.parameters)
+    for n, ci in (disc["bias"].get("widened") or {}).items():
+        if ci is not None:
+            parameters[n] = replace(parameters[n], ci95=(float(ci[0]), float(ci[1])))
+    warnings = ident.warnings + tuple(floor_bias_warnings(disc["bias"], {n: e.stderr for n, e in free.items()}))
+    return replace(ident, parameters=parameters, warnings=warnings, settings=replace(ident.settings, floor_bias=True),
+                   extra={**ident.extra, "discretization": disc})
 
 
 def discretization(diagram, network) -> dict:
