@@ -147,6 +147,8 @@ VARIANTS = {
     "residual-trials": {**T, "trial_jacobian": False},  # every trial residual-only, the Jacobian simulated again
     "before-speed": {**T, "damping": "trainlm", "trial_jacobian": False},
     "identify": {},  # identify() itself, every default (substeps, shooting auto, curves' start): fit_identify
+    # identify() with the box and the trust radius on learned curves too (the default keeps their transform)
+    "identify-box": {"lm_bounds": "box", "lm_damping": "trust"},
 }
 FACTOR = 3.0
 GLOBAL = 1.05
@@ -193,10 +195,11 @@ def fit_ours(chart, data, variant: dict, seed: int, shooting: int = 0):
     return problem, r.x, r.cost, time.perf_counter() - t0, iterations, r.status
 
 
-def fit_identify(chart, data, seed: int):
-    """One default `identify` run (what a user gets: shooting auto, the curves' start, the stability check)."""
+def fit_identify(chart, data, seed: int, **settings):
+    """One default `identify` run (what a user gets: shooting auto, the curves' start, the stability check);
+    `settings`: IdentifySettings fields that differ from the defaults."""
     t0 = time.perf_counter()
-    out = identify(chart, data, settings=IdentifySettings(seed=seed))
+    out = identify(chart, data, settings=IdentifySettings(seed=seed, **settings))
     secs = time.perf_counter() - t0
     lm = out.lm
     brief = (out.extra.get("curve_start") or {}).get("iterations", 0)
@@ -258,8 +261,8 @@ def main() -> None:
         runs["trf"] = []
     ref = []
     for name in variants:
-        if name == "identify":
-            ref.append(fit_identify(truth_chart(chart, truth), data, args.seed)[2])
+        if name.startswith("identify"):
+            ref.append(fit_identify(truth_chart(chart, truth), data, args.seed, **VARIANTS[name])[2])
             continue
         ref.append(fit_ours(truth_chart(chart, truth), data, VARIANTS[name], args.seed)[2])
     if not args.no_trf:
@@ -270,8 +273,8 @@ def main() -> None:
         for name in runs:  # interleaved: every method on draw i before draw i + 1 (fair under shared load)
             if name == "trf":
                 out = fit_trf(rough, data, args.seed)
-            elif name == "identify":
-                out = fit_identify(rough, data, args.seed)
+            elif name.startswith("identify"):
+                out = fit_identify(rough, data, args.seed, **VARIANTS[name])
             elif name.startswith("shoot-"):
                 out = fit_ours(rough, data, VARIANTS["default"], args.seed, int(name[6:]))
             else:
