@@ -99,13 +99,10 @@ def _significant(s: Score, settings: DiagnoseSettings) -> bool:
 def _refit_set(scr: Screen, settings: DiagnoseSettings) -> list[Score]:
     """The best option of each of the `top` best places with a significant score, plus the runners-up of the
     best place's scan (a dead time's n or a cogging harmonic is decided by refitting, not by the score)."""
-    def significant(s: Score) -> bool:
-        return _significant(s, settings)
-
-    best = [s for s in scr.best_per_place() if significant(s)][: settings.top]
+    best = [s for s in scr.best_per_place() if _significant(s, settings)][: settings.top]
     if best and settings.runners_up > 0:
         key = best[0].candidate.key
-        more = [s for s in scr.scores if significant(s) and s.candidate.key == key and s is not best[0]]
+        more = [s for s in scr.scores if _significant(s, settings) and s.candidate.key == key and s is not best[0]]
         best[1:1] = more[: settings.runners_up]
     return best
 
