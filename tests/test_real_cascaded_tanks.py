@@ -7,12 +7,12 @@ linear model 0.588 V), and the continuous RK4 simulation of the identified chart
 
 from __future__ import annotations
 
-import importlib.util
 import math
 from pathlib import Path
 
 import numpy as np
 import pytest
+from example_module import load_example
 
 import flowchart2sdnn as sd
 from flowchart2sdnn.simulate.continuous import simulate_continuous
@@ -26,13 +26,6 @@ pytestmark = [
 ]
 
 
-def _example():
-    spec = importlib.util.spec_from_file_location("cascaded_tanks_example", ROOT / "examples" / "cascaded_tanks.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
-
-
 @pytest.fixture(scope="module")
 def fitted():
     chart = sd.load_chart(ROOT / "diagrams" / "real" / "cascaded_tanks.yaml")
@@ -41,7 +34,7 @@ def fitted():
 
 
 def test_plain_torricelli_model_scores_as_reported_in_the_readme(fitted):
-    ex = _example()
+    ex = load_example("cascaded_tanks")
     test = sd.read_csv(DATA / "validation.csv")
     assert fitted.converged
     x10, tested = ex.validation_start(fitted.chart, test)
@@ -55,7 +48,7 @@ def test_plain_torricelli_model_scores_as_reported_in_the_readme(fitted):
 def test_identified_network_follows_the_continuous_chart_on_the_validation_input(fitted):
     """The identified chart's network (substeps 4, h = 1 s) against its RK4 simulation: the discretization is
     not what limits the model."""
-    ex = _example()
+    ex = load_example("cascaded_tanks")
     test = sd.read_csv(DATA / "validation.csv")
     y_net = ex.chart_simulation(fitted.chart, test)
     y_ode = simulate_continuous(fitted.chart, test.columns["u_V"][:, None], init={"y_V": test.columns["y_V"][0]},

@@ -8,12 +8,12 @@ draws within the bounds. Skipped when the data are absent.
 
 from __future__ import annotations
 
-import importlib.util
 import json
 from pathlib import Path
 
 import numpy as np
 import pytest
+from example_module import load_benchmark
 
 import flowchart2sdnn as sd
 
@@ -24,13 +24,6 @@ pytestmark = [
     pytest.mark.realdata,
     pytest.mark.skipif(not (DATA / "estimation.csv").exists(), reason="cascaded tanks data not present"),
 ]
-
-
-def _limits():
-    spec = importlib.util.spec_from_file_location("cascaded_tanks_limits", ROOT / "benchmarks" / "cascaded_tanks_limits.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    return module
 
 
 @pytest.fixture(scope="module")
@@ -57,7 +50,7 @@ def test_one_start_already_reaches_the_estimation_minimum_of_eight(records, fitt
 def test_the_five_sample_start_costs_under_0_01_volt(records, fitted):
     """The start fitted on the protocol's 5 samples against the start fitted on the whole test record (the best
     any window could give): measured 0.2423 against 0.2382 V."""
-    limits = _limits()
+    limits = load_benchmark("cascaded_tanks_limits")
     y = records[1].columns["y_V"]
     five = limits.rms(limits.free_run(fitted.chart, records[1], 5)[5:] - y[5:])
     whole = limits.rms(limits.free_run(fitted.chart, records[1], records[1].n_rows)[5:] - y[5:])
@@ -69,7 +62,7 @@ def test_the_error_beyond_the_estimation_range_is_a_third_of_the_test_error(reco
     """The test level falls below the estimation record's lowest level (2.91 V) only at its end (31 rows from
     row 967); rows 960-1023 hold about a third of the squared error (measured 0.31; RMSE 0.537 V there, 0.208 V
     on rows 5-959, still above 0.191 V)."""
-    limits = _limits()
+    limits = load_benchmark("cascaded_tanks_limits")
     train, test = records
     y = test.columns["y_V"]
     below = np.flatnonzero(y < train.columns["y_V"].min())

@@ -299,13 +299,8 @@ def unpredictable(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettin
     candidate, on EMPS a learned friction curve bent on the first 0.5 s won over the physical terms
     (docs/diagnose.md).
     """
-    if not math.isfinite(fitted.cost) or getattr(fitted.identification, "problem", None) is None:
-        return False
-    try:
-        problem = current_problem(fitted, train, settings)
-    except (SdnnError, ValueError, KeyError):
-        return False
-    if not _above_noise(fitted, problem, NOISE_MARGIN):
+    problem = _training_problem(fitted, train, settings)
+    if problem is None or not _above_noise(fitted, problem, NOISE_MARGIN):
         return False
     return choose_shooting(problem, problem.compiled.theta0()).peak > SUSPECT_PEAK
 
@@ -313,13 +308,19 @@ def unpredictable(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettin
 def far_above_noise(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings, ratio: float) -> bool:
     """Whether the training residual RMS of `fitted` exceeds `ratio` x the noise read off the records' second
     differences (:func:`~flowchart2sdnn.identify.shooting.noise_level`); False where that cannot be told."""
+    problem = _training_problem(fitted, train, settings)
+    return problem is not None and _above_noise(fitted, problem, ratio)
+
+
+def _training_problem(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> Problem | None:
+    """The problem of `fitted`'s chart on the training records, None for a fit without a finite cost or a chart
+    that no longer builds."""
     if not math.isfinite(fitted.cost) or getattr(fitted.identification, "problem", None) is None:
-        return False
+        return None
     try:
-        problem = current_problem(fitted, train, settings)
+        return current_problem(fitted, train, settings)
     except (SdnnError, ValueError, KeyError):
-        return False
-    return _above_noise(fitted, problem, ratio)
+        return None
 
 
 def _above_noise(fitted: Fitted, problem: Problem, ratio: float) -> bool:

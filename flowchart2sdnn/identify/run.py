@@ -190,14 +190,9 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         warnings.extend(floor_warnings(disc["floor"], fit.train.rms, diagram, problem.network))
         if settings.floor_bias and out.lm is not None and not interrupted and status != "no_excitation":
             free = {n: e for n, e in parameters.items() if not e.fixed and n not in means}
-            disc["bias"] = estimate_floor_bias(problem, chart, xs, records, lower, upper,
-                                               lm_options(settings, problem),
-                                               {n: (e.value, e.stderr, e.ci95) for n, e in free.items()}, oracle)
-            warnings.extend(floor_bias_warnings(disc["bias"], {n: e.stderr for n, e in free.items()}))
-            # the reported interval covers the noise and the discretization's shift (ci95_noise keeps the former)
-            for n, ci in (disc["bias"].get("widened") or {}).items():
-                if ci is not None:
-                    parameters[n] = replace(parameters[n], ci95=(float(ci[0]), float(ci[1])))
+            disc["bias"], parameters, bias_warnings = _floor_bias(problem, chart, xs, records, settings, parameters,
+                                                                  free, oracle)
+            warnings.extend(bias_warnings)
     return Identification(
         status=status, message=message, interrupted=bool(interrupted), converged=converged, parameters=parameters,
         curves={b: Curve(tuple(c["a"]), tuple(c["v"]), tuple(c["b"]) if "b" in c else None, c["fixed"])
@@ -231,17 +226,25 @@ def with_floor_bias(ident: Identification, train: Sequence[Dataset]) -> Identifi
     if problem is None or ident.x is None or ident.chart is None or ident.lm is None or "bias" in disc:
         return ident
     free = {n: e for n, e in ident.parameters.items() if not e.fixed and n in problem.names}
-    lower, upper = problem.bounds()
-    disc["bias"] = estimate_floor_bias(problem, ident.chart, ident.x, list(train), lower, upper,
-                                       lm_options(ident.settings, problem),
-                                       {n: (e.value, e.stderr, e.ci95) for n, e in free.items()})
-    parameters = dict(ident.parameters)
-    for n, ci in (disc["bias"].get("widened") or {}).items():
-        if ci is not None:
-            parameters[n] = replace(parameters[n], ci95=(float(ci[0]), float(ci[1])))
-    warnings = ident.warnings + tuple(floor_bias_warnings(disc["bias"], {n: e.stderr for n, e in free.items()}))
+    disc["bias"], parameters, bias_warnings = _floor_bias(problem, ident.chart, ident.x, list(train), ident.settings,
+                                                          ident.parameters, free)
+    warnings = ident.warnings + tuple(bias_warnings)
     return replace(ident, parameters=parameters, warnings=warnings, settings=replace(ident.settings, floor_bias=True),
                    extra={**ident.extra, "discretization": disc})
+
+
+def _floor_bias(problem: Problem, chart, x, records: list, settings: IdentifySettings, parameters: dict, free: dict,
+                oracle=None) -> tuple[dict, dict, list[str]]:
+    """(RESULT.json's `discretization.bias`, `parameters` with the reported ci95 covering the noise and the
+    discretization's shift (ci95_noise keeps the former), the warnings) at the fitted point x."""
+    lower, upper = problem.bounds()
+    bias = estimate_floor_bias(problem, chart, x, records, lower, upper, lm_options(settings, problem),
+                               {n: (e.value, e.stderr, e.ci95) for n, e in free.items()}, oracle)
+    parameters = dict(parameters)
+    for n, ci in (bias.get("widened") or {}).items():
+        if ci is not None:
+            parameters[n] = replace(parameters[n], ci95=(float(ci[0]), float(ci[1])))
+    return bias, parameters, floor_bias_warnings(bias, {n: e.stderr for n, e in free.items()})
 
 
 def discretization(diagram, network) -> dict:
