@@ -57,7 +57,7 @@ import numpy as np
 from scipy import sparse
 
 from ..errors import SdnnError
-from ..fit.lm import LMOptions, LMResult, levenberg_marquardt
+from ..fit.lm import LMOptions, LMResult, WideColumns, WideFirstCSR, levenberg_marquardt
 from .initstate import state_neurons
 from .problem import Problem, _interruptible
 
@@ -103,6 +103,51 @@ class _Piece:
     a: int  # first network step (row of the record's inputs/targets)
     b: int
     column: int  # first column of its free start in x, -1 for a record's first segment (fixed start)
+
+
+@dataclass(frozen=True, eq=False)
+class _ChunkPlan:
+    """Where one kernel call's results go (:meth:`Segmented._plan`): its record and samples ``a:b``; the places in
+    e of its output errors; for its pieces' output rows, flat indices into its dy (``out_src``) and their places
+    in J's data (``out_dst``); likewise for the continuity rows whose end state it holds (``link_*``, each value
+    times the row weight of its state ``link_state``); and its rows of those end states (``end_rows``)."""
+
+    record: int
+    a: int
+    b: int
+    e_dst: np.ndarray
+    out_src: np.ndarray
+    out_dst: np.ndarray
+    link_src: np.ndarray
+    link_dst: np.ndarray
+    link_state: np.ndarray
+    end_rows: np.ndarray
+
+
+@dataclass(frozen=True, eq=False)
+class _Plan:
+    """Segmented.fun's fixed CSR pattern (``indices``, ``indptr``; ``rows`` x n_x with ``nnz`` values), where each
+    call's values go (``chunks``; the continuity rows' d(-weight * start)/d start: ``eye_*``; their rows in e and
+    the start's columns in x: ``link_rows``, ``link_columns``, one row per boundary), whether J is handed over
+    dense, and the pattern's split for fit.lm's JᵀJ."""
+
+    rows: int
+    nnz: int
+    indices: np.ndarray
+    indptr: np.ndarray
+    chunks: list
+    eye_dst: np.ndarray
+    eye_state: np.ndarray
+    eye_value: np.ndarray
+    link_rows: np.ndarray
+    link_columns: np.ndarray
+    dense: bool
+    split: WideColumns
+
+
+def _cat(parts: list) -> np.ndarray:
+    """Index arrays joined (empty: none)."""
+    return np.concatenate(parts).astype(np.intp) if parts else np.zeros(0, dtype=np.intp)
 
 
 class Segmented:
@@ -153,7 +198,7 @@ class Segmented:
         # boundary count like the L output samples of a segment
         self.scale = np.ones(len(self.free)) if scale is None else np.asarray(scale, dtype=float)
         self.row_weight = self.weight * np.sqrt(self.length) / self.scale
-        self._csr = None
+        self._plan_cache = None
         self._groups = None
         self._records = problem.segments  # built anew at each access of the property
 
@@ -201,110 +246,181 @@ class Segmented:
         """:meth:`history` of each piece in `chunk`, as rows."""
         return np.stack([self.history(x, self.pieces[i]) for i in chunk])
 
-    def _runs(self, x: np.ndarray, with_jac: bool):
-        """(piece, outputs and end states, their sensitivities or None) of every segment, in order; one kernel
-        call per chunk (:meth:`_chunks`), the chunks on `threads` threads (the kernels release the GIL; each
-        segment's run is independent of the others')."""
+    def _chunk_runs(self, x: np.ndarray, with_jac: bool):
+        """(chunk index, outputs and end states, their sensitivities or None) of every chunk (:meth:`_chunks`), in
+        order: one kernel call each, the chunks on `threads` threads (the kernels release the GIL; each segment's
+        run is independent of the others'). A chunk's rows are its pieces' samples, one after the other."""
         theta = x[:self.n_theta]
         states = self.free if len(self.free) else None
         compiled = self.problem.compiled
         compiled.connection_values(theta, with_jac)  # evaluated once, before the threads share it
         segments = self._records
+        chunks = self._chunks()
 
-        def run(chunk: list[int]):
-            pieces = [self.pieces[i] for i in chunk]
+        def run(c: int):
+            pieces = [self.pieces[i] for i in chunks[c]]
             y, dy = compiled.run_pieces(theta, segments[pieces[0].record].inputs, [p.a for p in pieces],
-                                        [p.b for p in pieces], self._histories(x, chunk), states, with_jac)
-            out, row = [], 0
-            for p in pieces:
-                n = p.b - p.a
-                out.append((p, y[row:row + n], None if dy is None else dy[row:row + n]))
-                row += n
-            return out
+                                        [p.b for p in pieces], self._histories(x, chunks[c]), states, with_jac)
+            return c, y, dy
 
         with _interruptible():
-            chunks = self._chunks()
             if self.threads == 1 or len(chunks) == 1:
-                for chunk in chunks:
-                    yield from run(chunk)
+                for c in range(len(chunks)):
+                    yield run(c)
                 return
             with ThreadPoolExecutor(self.threads) as pool:
-                for out in pool.map(run, chunks):
-                    yield from out
+                yield from pool.map(run, range(len(chunks)))
+
+    def _runs(self, x: np.ndarray, with_jac: bool):
+        """(piece, outputs and end states, their sensitivities or None) of every segment, in order
+        (:meth:`_chunk_runs`, cut into its pieces)."""
+        chunks = self._chunks()
+        for c, y, dy in self._chunk_runs(x, with_jac):
+            row = 0
+            for i in chunks[c]:
+                p = self.pieces[i]
+                n = p.b - p.a
+                yield p, y[row:row + n], None if dy is None else dy[row:row + n]
+                row += n
 
     def residual(self, x: np.ndarray):
+        """e of :meth:`fun` without the Jacobian."""
         x = np.asarray(x, dtype=float)
-        n_out = self.problem.compiled.n_outputs
-        es, prev = [], None
-        for p, y, _ in self._runs(x, False):
+        plan = self._plan()
+        e = np.empty(plan.rows)
+        ends = []
+        for c, y, _ in self._chunk_runs(x, False):
             if not np.all(np.isfinite(y)):
                 return None
-            es.append((self._records[p.record].targets[p.a:p.b] - y[:, :n_out]).ravel())
-            if p.column >= 0:
-                es.append(-self.row_weight * (prev - x[p.column:p.column + len(self.free)]))
-            prev = y[-1, n_out:]
-        return np.concatenate(es)
+            ends.append(self._fill_outputs(plan, plan.chunks[c], y, e))
+        self._fill_links(plan, x, ends, e)
+        return e
 
     def fun(self, x: np.ndarray):
         """(e, J) with J sparse (CSR): a segment's rows have nonzeros in theta's columns and its own start's;
         a continuity row in theta's, the previous start's and its own. The nonzero pattern is fixed by the
-        pieces (:meth:`_pattern`), so each call only writes the values: building the pattern per call cost 40 %
-        of an iteration at L = 100 (benchmarks/bench_shooting_iteration.py)."""
+        pieces (:meth:`_plan`), so each call only writes the values, by index arrays built once: building the
+        pattern per call cost 40 % of an iteration at L = 100, writing it piece by piece in Python 10 %
+        (benchmarks/bench_shooting_iteration.py). J is a fit.lm.WideFirstCSR: theta's columns begin every row,
+        and the trainer forms JᵀJ from that split without slicing J."""
         x = np.asarray(x, dtype=float)
-        n_out, P, S = self.problem.compiled.n_outputs, self.n_theta, len(self.free)
-        starts, indices, indptr = self._pattern()
-        data = np.empty(len(indices))
-        es, prev = [], None
-        for (p, y, dy), (at, link_at) in zip(self._runs(x, True), starts, strict=True):
-            m = (p.b - p.a) * n_out
-            es.append((self._records[p.record].targets[p.a:p.b] - y[:, :n_out]).ravel())
-            block = dy[:, :n_out, :P + (S if p.column >= 0 else 0)]
-            data[at:at + block.size] = block.reshape(m, -1).ravel()
-            if p.column >= 0:
-                # continuity: weight * (end of the previous segment - this start), its Jacobian
-                end, dend, column = prev
-                es.append(-self.row_weight * (end - x[p.column:p.column + S]))
-                link = np.concatenate([dend[:, :P + (S if column >= 0 else 0)], -np.eye(S)], axis=1)
-                data[link_at:link_at + link.size] = (link * self.row_weight[:, None]).ravel()
-            if S:
-                prev = (y[-1, n_out:], dy[-1, n_out:, :], p.column)
-        e = np.concatenate(es)
+        plan = self._plan()
+        e, data = np.empty(plan.rows), np.empty(plan.nnz)
+        ends = []
+        for c, y, dy in self._chunk_runs(x, True):
+            chunk = plan.chunks[c]
+            ends.append(self._fill_outputs(plan, chunk, y, e))
+            values = dy.ravel()
+            data[chunk.out_dst] = values[chunk.out_src]
+            # continuity: weight * (end of the previous segment - this start), its Jacobian (the ends' rows here)
+            data[chunk.link_dst] = values[chunk.link_src] * self.row_weight[chunk.link_state]
+        data[plan.eye_dst] = plan.eye_value * self.row_weight[plan.eye_state]  # d(- weight * start) / d start
+        self._fill_links(plan, x, ends, e)
         if not (np.all(np.isfinite(e)) and np.all(np.isfinite(data))):
             return None
-        J = sparse.csr_matrix((data, indices, indptr), shape=(len(indptr) - 1, self.n_x))
-        # few segments: J is mostly nonzero, and BLAS on the dense matrix beats sparse products (JᵀJ of 10
-        # segments: 1.4 ms dense, 16 ms sparse)
-        return e, (J.toarray() if P + S >= DENSE_FRACTION * self.n_x else J)
+        if plan.dense:
+            # few segments: J is mostly nonzero, and BLAS on the dense matrix beats sparse products (JᵀJ of 10
+            # segments: 1.4 ms dense, 16 ms sparse)
+            return e, sparse.csr_matrix((data, plan.indices, plan.indptr), shape=(plan.rows, self.n_x)).toarray()
+        J = WideFirstCSR((data, plan.indices, plan.indptr), shape=(plan.rows, self.n_x))
+        J.split = plan.split
+        return e, J
 
-    def _pattern(self) -> tuple[list[tuple[int, int]], np.ndarray, np.ndarray]:
-        """fun's CSR pattern: per piece the offsets of its output rows' and continuity rows' values in the
-        data array (-1: none), then the column indices and the row pointers (columns ascending in each row)."""
-        if self._csr is not None:
-            return self._csr
+    def _fill_outputs(self, plan: _Plan, chunk: _ChunkPlan, y: np.ndarray, e: np.ndarray) -> np.ndarray:
+        """The chunk's output errors into e; returns the end states of its pieces that a continuity row reads."""
+        n_out = self.problem.compiled.n_outputs
+        targets = self._records[chunk.record].targets[chunk.a:chunk.b]
+        e[chunk.e_dst] = (targets - y[:, :n_out]).ravel()
+        return y[chunk.end_rows, n_out:]
+
+    def _fill_links(self, plan: _Plan, x: np.ndarray, ends: list[np.ndarray], e: np.ndarray) -> None:
+        """The continuity rows of e: -weight * (end of the previous segment - this start), from every chunk's
+        `ends` (:meth:`_fill_outputs`)."""
+        if not plan.link_rows.size:
+            return
+        end = np.concatenate(ends) if len(ends) > 1 else ends[0]
+        e[plan.link_rows] = -self.row_weight * (end - x[plan.link_columns])
+
+    def _plan(self) -> _Plan:
+        """fun's CSR pattern and the index arrays that write a call's values into it (:class:`_Plan`); built
+        once (columns ascending in each row; theta's first)."""
+        if self._plan_cache is not None:
+            return self._plan_cache
         n_out, P, S = self.problem.compiled.n_outputs, self.n_theta, len(self.free)
+        K, C = n_out + S, P + S  # a kernel row's recorded neurons and sensitivity columns
         theta_cols = np.arange(P)
-        starts, indices, widths, at, before = [], [], [], 0, -1
-        for p in self.pieces:
+        indices, widths, at, row, before = [], [], 0, 0, -1
+        out_at, link_at, out_row, link_row = {}, {}, {}, {}
+        for i, p in enumerate(self.pieces):
             own = np.arange(p.column, p.column + S) if p.column >= 0 else np.zeros(0, dtype=np.int64)
             m = (p.b - p.a) * n_out
             cols = np.concatenate([theta_cols, own])
             indices.append(np.tile(cols, m))
             widths.append(np.full(m, len(cols)))
-            out_at, at, link_at = at, at + m * len(cols), -1
+            out_at[i], out_row[i], at, row = at, row, at + m * len(cols), row + m
             if p.column >= 0:
                 prior = np.arange(before, before + S) if before >= 0 else np.zeros(0, dtype=np.int64)
                 cols = np.concatenate([theta_cols, prior, own])
                 indices.append(np.tile(cols, S))
                 widths.append(np.full(S, len(cols)))
-                link_at, at = at, at + S * len(cols)
-            starts.append((out_at, link_at))
+                link_at[i], link_row[i], at, row = at, row, at + S * len(cols), row + S
             before = p.column
         widths = np.concatenate(widths)
         # 32-bit indices where they fit, as scipy keeps them: it downcast 64-bit ones at every call (0.5 ms)
         index = np.int32 if int(np.sum(widths)) < 2**31 else np.int64
         indptr = np.concatenate([[0], np.cumsum(widths)]).astype(index)
-        self._csr = (starts, np.concatenate(indices).astype(index), indptr)
-        return self._csr
+        indices = np.concatenate(indices).astype(index)
+        chunks = []
+        for chunk in self._chunks():
+            e_dst, out_src, out_dst, link_src, link_dst, link_state, end_rows, local = [], [], [], [], [], [], [], 0
+            for i in chunk:
+                p = self.pieces[i]
+                n, width = p.b - p.a, P + (S if p.column >= 0 else 0)
+                e_dst.append(out_row[i] + np.arange(n * n_out))
+                # output rows: dy[local + t, o, :width] -> the row's values in order
+                t, o, j = np.meshgrid(np.arange(n), np.arange(n_out), np.arange(width), indexing="ij")
+                out_src.append((((local + t) * K + o) * C + j).ravel())
+                out_dst.append(out_at[i] + np.arange(n * n_out * width))
+                after = i + 1
+                if after < len(self.pieces) and self.pieces[after].column >= 0 \
+                        and self.pieces[after].record == p.record:
+                    # the next piece's continuity rows read this piece's end: dy[end, n_out + s, :width]
+                    end = local + n - 1
+                    end_rows.append(end)
+                    span = width + S  # theta's, this piece's start's (if free), the next's
+                    s, j = np.meshgrid(np.arange(S), np.arange(width), indexing="ij")
+                    link_src.append(((end * K + n_out + s) * C + j).ravel())
+                    link_dst.append((link_at[after] + s * span + j).ravel())
+                    link_state.append(s.ravel())
+                local += n
+            first, last = self.pieces[chunk[0]], self.pieces[chunk[-1]]
+            chunks.append(_ChunkPlan(first.record, first.a, last.b, _cat(e_dst), _cat(out_src), _cat(out_dst),
+                                     _cat(link_src), _cat(link_dst), _cat(link_state), np.array(end_rows, dtype=np.intp)))
+        eye_dst, eye_state, eye_value, link_rows, link_columns = [], [], [], [], []
+        for i, p in enumerate(self.pieces):
+            if p.column < 0:
+                continue
+            prior = S if self.pieces[i - 1].column >= 0 else 0
+            span = P + prior + S
+            s, j = np.meshgrid(np.arange(S), np.arange(S), indexing="ij")
+            eye_dst.append((link_at[i] + s * span + P + prior + j).ravel())
+            eye_state.append(s.ravel())
+            eye_value.append(-np.eye(S).ravel())
+            link_rows.append(link_row[i] + np.arange(S))
+            link_columns.append(p.column + np.arange(S))
+        rows = len(indptr) - 1
+        # every row begins with theta's P columns: their values' places, and the rest's CSR, for fit.lm's JᵀJ
+        wide_at = (indptr[:-1, None].astype(np.intp) + np.arange(P)).astype(np.intp)
+        rest = np.ones(len(indices), dtype=bool)
+        rest[wide_at.ravel()] = False
+        split = WideColumns(P, wide_at, np.flatnonzero(rest), (indices[rest] - P).astype(index),
+                            (indptr - P * np.arange(rows + 1)).astype(index))
+        self._plan_cache = _Plan(rows, len(indices), indices, indptr, chunks, _cat(eye_dst), _cat(eye_state),
+                          np.concatenate(eye_value) if eye_value else np.zeros(0),
+                          _cat(link_rows).reshape(-1, S) if S else np.zeros((0, 0), dtype=np.intp),
+                          _cat(link_columns).reshape(-1, S) if S else np.zeros((0, 0), dtype=np.intp),
+                          P + S >= DENSE_FRACTION * self.n_x, split)
+        return self._plan_cache
 
     def output_cost(self, x: np.ndarray) -> float:
         """0.5 * sum of the outputs' squared errors over every segment (the continuity rows left out)."""
