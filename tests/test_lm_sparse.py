@@ -73,3 +73,25 @@ def test_the_gram_of_a_partly_wide_sparse_jacobian_is_numpys(order):
     if order == "shuffled":
         dense = dense[:, rng.permutation(dense.shape[1])]
     np.testing.assert_allclose(_gram(sparse.csr_matrix(dense)), dense.T @ dense, rtol=1e-12, atol=1e-12)
+
+
+def test_a_wide_first_csr_gives_the_gram_of_its_blocks():
+    """A WideFirstCSR hands its first columns over dense and the rest as CSR (a multiple-shooting Jacobian:
+    theta's columns in every row); fit.lm._gram builds JᵀJ from them. Oracle: numpy's JᵀJ of the dense matrix;
+    blocks of the wrong shape are not used (the matrix's own columns are)."""
+    from flowchart2sdnn.fit.lm import WideFirstCSR, _gram
+
+    rng = np.random.default_rng(5)
+    rows, wide, blocks = 400, 3, 16
+    dense = np.zeros((rows, wide + blocks))
+    dense[:, :wide] = rng.normal(size=(rows, wide))
+    for b in range(blocks):
+        dense[b * 25:(b + 1) * 25, wide + b] = rng.normal(size=25)
+    J = WideFirstCSR(dense)
+    J.wide, J.rest = dense[:, :wide].copy(), sparse.csr_matrix(dense[:, wide:])
+    np.testing.assert_allclose(_gram(J), dense.T @ dense, rtol=1e-12, atol=1e-12)
+    # the blocks are what the products see: a changed block changes JᵀJ (they are not recomputed from J)
+    J.wide = 2.0 * dense[:, :wide]
+    assert not np.allclose(_gram(J)[:wide, :wide], dense[:, :wide].T @ dense[:, :wide])
+    J.wide = dense[:, :wide + 1].copy()  # a block of the wrong shape: J's own columns instead
+    np.testing.assert_allclose(_gram(J), dense.T @ dense, rtol=1e-12, atol=1e-12)

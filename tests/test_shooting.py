@@ -21,7 +21,7 @@ from flowchart2sdnn.cli import main
 from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
-from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
+from flowchart2sdnn.fit.lm import LMOptions, _gram, levenberg_marquardt
 from flowchart2sdnn.identify import shooting
 from flowchart2sdnn.identify.initstate import state_neurons
 from flowchart2sdnn.identify.problem import build_problem
@@ -137,7 +137,9 @@ def test_pieces_in_one_kernel_call_equal_one_call_per_piece():
 
 
 @pytest.mark.parametrize("threads", [1, 2])
-def test_two_records_jacobian_matches_central_differences(threads):
+@pytest.mark.parametrize("dense_fraction", [0.25, 2.0])  # the trainer gets J dense / sparse (CSR)
+def test_two_records_jacobian_matches_central_differences(threads, dense_fraction, monkeypatch):
+    monkeypatch.setattr(shooting, "DENSE_FRACTION", dense_fraction)
     chart = load_diagram(COULOMB)
     problem = build_problem(chart, _data(COULOMB_PLANT, 130, 5, ["w1", "w2"]),
                             more=[_data(COULOMB_PLANT, 70, 6, ["w1", "w2"])])
@@ -149,6 +151,13 @@ def test_two_records_jacobian_matches_central_differences(threads):
     x = seg.start(problem.compiled.theta0() * 0.9)
     x[seg.n_theta:] += 0.01 * rng.standard_normal(seg.n_x - seg.n_theta)
     e, J = seg.fun(x)
+    assert sparse.issparse(J) == (dense_fraction > 1)
+    if sparse.issparse(J):  # the blocks handed to the trainer's JᵀJ are J's own columns (scipy's slices)
+        P = seg.n_theta
+        np.testing.assert_array_equal(J.wide, J[:, :P].toarray())
+        np.testing.assert_array_equal(J.rest.toarray(), J[:, P:].toarray())
+        dense = J.toarray()
+        np.testing.assert_allclose(_gram(J), dense.T @ dense, rtol=1e-12, atol=1e-12 * np.abs(dense).max() ** 2)
     J = J.toarray() if sparse.issparse(J) else J
     np.testing.assert_array_equal(e, seg.residual(x))
     assert e.size == (129 + 69) * 2 + 6

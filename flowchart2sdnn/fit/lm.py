@@ -34,7 +34,7 @@ from .damping import TRAINLM_MU0, first_mu, mu_accepted, mu_refused, nielsen_acc
 from .transforms import Bounds
 
 __all__ = ["LMOptions", "LMResult", "levenberg_marquardt", "damped_step", "STATUS_MESSAGES", "CONVERGED_STATUSES",
-           "WideColumns", "WideFirstCSR"]
+           "WideFirstCSR"]
 
 #: Status code -> message (scipy style).  ``LMResult.message`` starts with one of these.
 STATUS_MESSAGES: dict[str, str] = {
@@ -280,7 +280,7 @@ def _call_fun(fun, x, n_params, counters) -> tuple[np.ndarray, np.ndarray] | Non
     e = _check_e(e, counters)
     if e is None or J is None:
         return None
-    if sparse.issparse(J):  # a CSR float matrix as it is: a WideFirstCSR keeps its split
+    if sparse.issparse(J):  # a CSR float matrix as it is: a WideFirstCSR keeps its blocks
         J = J if sparse.isspmatrix_csr(J) and J.dtype == np.float64 else sparse.csr_matrix(J, dtype=float)
     else:
         J = np.array(J, dtype=float)
@@ -305,37 +305,15 @@ def _over_columns(J, s: np.ndarray):
 WIDE_COLUMN = 0.5
 
 
-@dataclass(frozen=True, eq=False)
-class WideColumns:
-    """A CSR pattern whose every row begins with the same `count` columns 0..count-1 (a multiple-shooting
-    Jacobian's parameters), split once for all the matrices of that pattern: ``at`` (M, count), the places of
-    those entries in the data array; ``rest_at`` the other entries' places, ``rest_indices`` and ``rest_indptr``
-    the rest's CSR pattern (columns less `count`)."""
-
-    count: int
-    at: np.ndarray
-    rest_at: np.ndarray
-    rest_indices: np.ndarray
-    rest_indptr: np.ndarray
-
-
 class WideFirstCSR(sparse.csr_matrix):
-    """A CSR Jacobian carrying its pattern's :class:`WideColumns` in ``split`` (None: none): JᵀJ then takes the
-    wide columns' dense copy and the rest's CSR by gathers from the data array, without scipy's column slicing
-    and the count of every column's nonzeros (5 of _gram's 7 ms at 250 segments, bench_shooting_iteration).
-    Anything scipy derives from it is a plain CSR matrix (or one with ``split`` None)."""
+    """A CSR Jacobian whose caller also hands over its first ``wide.shape[1]`` columns as the dense array ``wide``
+    and the others as the CSR matrix ``rest`` (the values of J[:, :k].toarray() and J[:, k:]; None: not given):
+    JᵀJ then needs no column slicing of J nor a count of every column's nonzeros (5 of _gram's 7 ms at 250
+    segments, bench_shooting_iteration). A multiple-shooting Jacobian (identify.shooting) writes them from its
+    kernels' results; anything scipy derives from it is a plain CSR matrix (or one without them)."""
 
-    split: WideColumns | None = None
-
-    def wide_and_rest(self):
-        """(the wide columns as a dense (M, count) array, the rest as CSR), as J[:, :count].toarray() and
-        J[:, count:] give them; None without a split."""
-        w = self.split
-        if w is None or w.at.shape[0] != self.shape[0] or w.rest_indptr[-1] != self.nnz - w.at.size:
-            return None
-        rest = sparse.csr_matrix((self.data[w.rest_at], w.rest_indices, w.rest_indptr),
-                                 shape=(self.shape[0], self.shape[1] - w.count))
-        return self.data[w.at], rest
+    wide: np.ndarray | None = None
+    rest: sparse.csr_matrix | None = None
 
 
 def _gram(J) -> np.ndarray:
@@ -346,12 +324,10 @@ def _gram(J) -> np.ndarray:
     if not sparse.issparse(J):
         return J.T @ J
     n = J.shape[1]
-    split = J.wide_and_rest() if isinstance(J, WideFirstCSR) else None
-    if split is not None:
-        Jd, Js = split
-        k = Jd.shape[1]
-        if 0 < k < n:
-            return _gram_blocks(Jd, Js, slice(0, k), slice(k, n))
+    if isinstance(J, WideFirstCSR) and J.wide is not None and J.rest is not None:
+        k = J.wide.shape[1]
+        if 0 < k < n and J.wide.shape[0] == J.shape[0] and J.rest.shape == (J.shape[0], n - k):
+            return _gram_blocks(J.wide, J.rest, slice(0, k), slice(k, n))
     wide = np.bincount(J.indices, minlength=n) >= WIDE_COLUMN * J.shape[0]
     if not wide.any() or wide.all():
         return (J.T @ J).toarray()

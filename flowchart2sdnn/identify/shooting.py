@@ -57,7 +57,7 @@ import numpy as np
 from scipy import sparse
 
 from ..errors import SdnnError
-from ..fit.lm import LMOptions, LMResult, WideColumns, WideFirstCSR, levenberg_marquardt
+from ..fit.lm import LMOptions, LMResult, WideFirstCSR, levenberg_marquardt
 from .initstate import state_neurons
 from .problem import Problem, _interruptible
 
@@ -108,16 +108,17 @@ class _Piece:
 @dataclass(frozen=True, eq=False)
 class _ChunkPlan:
     """Where one kernel call's results go (:meth:`Segmented._plan`): its record and samples ``a:b``; the places in
-    e of its output errors; for its pieces' output rows, flat indices into its dy (``out_src``) and their places
-    in J's data (``out_dst``); likewise for the continuity rows whose end state it holds (``link_*``, each value
-    times the row weight of its state ``link_state``); and its rows of those end states (``end_rows``)."""
+    e of its output errors; its pieces' output rows as runs of like pieces (``groups``: each run's place in J's
+    data, first row of dy, pieces, samples per piece, columns, values per piece with its continuity rows), copied
+    by one strided copy per run; the values of the continuity rows that read an end state it holds by flat
+    indices into its dy (``link_src``) and their places in the data (``link_dst``), each times the row weight of
+    its state ``link_state``; and its rows of those end states (``end_rows``)."""
 
     record: int
     a: int
     b: int
     e_dst: np.ndarray
-    out_src: np.ndarray
-    out_dst: np.ndarray
+    groups: tuple
     link_src: np.ndarray
     link_dst: np.ndarray
     link_state: np.ndarray
@@ -129,7 +130,9 @@ class _Plan:
     """Segmented.fun's fixed CSR pattern (``indices``, ``indptr``; ``rows`` x n_x with ``nnz`` values), where each
     call's values go (``chunks``; the continuity rows' d(-weight * start)/d start: ``eye_*``; their rows in e and
     the start's columns in x: ``link_rows``, ``link_columns``, one row per boundary), whether J is handed over
-    dense, and the pattern's split for fit.lm's JᵀJ."""
+    dense, and how its blocks for fit.lm's JᵀJ are written (theta's columns dense: the continuity rows' ``link_rows``
+    from the data at ``link_wide_at``, the output rows by the chunks' groups; the other columns as CSR: the data at
+    ``rest_at``, pattern ``rest_indices``, ``rest_indptr``)."""
 
     rows: int
     nnz: int
@@ -142,7 +145,10 @@ class _Plan:
     link_rows: np.ndarray
     link_columns: np.ndarray
     dense: bool
-    split: WideColumns
+    link_wide_at: np.ndarray
+    rest_at: np.ndarray
+    rest_indices: np.ndarray
+    rest_indptr: np.ndarray
 
 
 def _cat(parts: list) -> np.ndarray:
@@ -199,6 +205,7 @@ class Segmented:
         self.scale = np.ones(len(self.free)) if scale is None else np.asarray(scale, dtype=float)
         self.row_weight = self.weight * np.sqrt(self.length) / self.scale
         self._plan_cache = None
+        self._history_rows = {}  # chunk -> (histories without the free starts, their rows, x's columns)
         self._groups = None
         self._records = problem.segments  # built anew at each access of the property
 
@@ -243,8 +250,18 @@ class Segmented:
         return self._groups
 
     def _histories(self, x: np.ndarray, chunk: list[int]) -> np.ndarray:
-        """:meth:`history` of each piece in `chunk`, as rows."""
-        return np.stack([self.history(x, self.pieces[i]) for i in chunk])
+        """:meth:`history` of each piece in `chunk`, as rows: the parts that x does not set built once per chunk,
+        then the free starts written in (one history at a time cost 0.5 ms a call at 250 segments)."""
+        key = tuple(int(i) for i in chunk)
+        if key not in self._history_rows:
+            base = np.stack([self.history(np.zeros(self.n_x), self.pieces[i]) for i in chunk])
+            rows = np.array([r for r, i in enumerate(chunk) if self.pieces[i].column >= 0], dtype=np.intp)
+            columns = np.array([self.pieces[chunk[r]].column for r in rows], dtype=np.intp)
+            self._history_rows[key] = (base, rows[:, None], columns[:, None] + np.arange(len(self.free)))
+        base, rows, columns = self._history_rows[key]
+        h = base.copy()
+        h[rows, self.free] = x[columns]
+        return h
 
     def _chunk_runs(self, x: np.ndarray, with_jac: bool):
         """(chunk index, outputs and end states, their sensitivities or None) of every chunk (:meth:`_chunks`), in
@@ -306,12 +323,21 @@ class Segmented:
         x = np.asarray(x, dtype=float)
         plan = self._plan()
         e, data = np.empty(plan.rows), np.empty(plan.nnz)
+        n_out, P = self.problem.compiled.n_outputs, self.n_theta
+        K, C = n_out + len(self.free), P + len(self.free)
+        wide = None if plan.dense else np.empty((plan.rows, P))  # theta's columns, for fit.lm's JᵀJ
         ends = []
         for c, y, dy in self._chunk_runs(x, True):
             chunk = plan.chunks[c]
             ends.append(self._fill_outputs(plan, chunk, y, e))
+            for at, row, k, n, width, period, csr_row, rows_per in chunk.groups:  # like pieces: strided copies
+                block = dy[row:row + k * n].reshape(k, n, K, C)[:, :, :n_out]
+                np.copyto(data[at:at + k * period].reshape(k, period)[:, :n * n_out * width].reshape(k, n, n_out, width),
+                          block[..., :width])
+                if wide is not None:
+                    np.copyto(wide[csr_row:csr_row + k * rows_per].reshape(k, rows_per, P)[:, :n * n_out]
+                              .reshape(k, n, n_out, P), block[..., :P])
             values = dy.ravel()
-            data[chunk.out_dst] = values[chunk.out_src]
             # continuity: weight * (end of the previous segment - this start), its Jacobian (the ends' rows here)
             data[chunk.link_dst] = values[chunk.link_src] * self.row_weight[chunk.link_state]
         data[plan.eye_dst] = plan.eye_value * self.row_weight[plan.eye_state]  # d(- weight * start) / d start
@@ -323,7 +349,10 @@ class Segmented:
             # segments: 1.4 ms dense, 16 ms sparse)
             return e, sparse.csr_matrix((data, plan.indices, plan.indptr), shape=(plan.rows, self.n_x)).toarray()
         J = WideFirstCSR((data, plan.indices, plan.indptr), shape=(plan.rows, self.n_x))
-        J.split = plan.split
+        wide[plan.link_rows.ravel()] = data[plan.link_wide_at]
+        J.wide = wide
+        J.rest = sparse.csr_matrix((data[plan.rest_at], plan.rest_indices, plan.rest_indptr),
+                                   shape=(plan.rows, self.n_x - P))
         return e, J
 
     def _fill_outputs(self, plan: _Plan, chunk: _ChunkPlan, y: np.ndarray, e: np.ndarray) -> np.ndarray:
@@ -372,15 +401,20 @@ class Segmented:
         indices = np.concatenate(indices).astype(index)
         chunks = []
         for chunk in self._chunks():
-            e_dst, out_src, out_dst, link_src, link_dst, link_state, end_rows, local = [], [], [], [], [], [], [], 0
+            e_dst, groups, link_src, link_dst, link_state, end_rows, local = [], [], [], [], [], [], 0
             for i in chunk:
                 p = self.pieces[i]
                 n, width = p.b - p.a, P + (S if p.column >= 0 else 0)
                 e_dst.append(out_row[i] + np.arange(n * n_out))
-                # output rows: dy[local + t, o, :width] -> the row's values in order
-                t, o, j = np.meshgrid(np.arange(n), np.arange(n_out), np.arange(width), indexing="ij")
-                out_src.append((((local + t) * K + o) * C + j).ravel())
-                out_dst.append(out_at[i] + np.arange(n * n_out * width))
+                # output rows: dy[local:local + n, :n_out, :width] -> data[out_at:], then its continuity rows
+                prior = S if p.column >= 0 and self.pieces[i - 1].column >= 0 else 0
+                period = n * n_out * width + (S * (width + prior) if p.column >= 0 else 0)
+                last = groups[-1] if groups else None
+                rows_per = n * n_out + (S if p.column >= 0 else 0)  # its output rows, then its continuity rows
+                if last is not None and last[3:6] == (n, width, period) and last[0] + last[2] * period == out_at[i]:
+                    groups[-1] = last[:2] + (last[2] + 1,) + last[3:]
+                else:
+                    groups.append((out_at[i], local, 1, n, width, period, out_row[i], rows_per))
                 after = i + 1
                 if after < len(self.pieces) and self.pieces[after].column >= 0 \
                         and self.pieces[after].record == p.record:
@@ -394,7 +428,7 @@ class Segmented:
                     link_state.append(s.ravel())
                 local += n
             first, last = self.pieces[chunk[0]], self.pieces[chunk[-1]]
-            chunks.append(_ChunkPlan(first.record, first.a, last.b, _cat(e_dst), _cat(out_src), _cat(out_dst),
+            chunks.append(_ChunkPlan(first.record, first.a, last.b, _cat(e_dst), tuple(groups),
                                      _cat(link_src), _cat(link_dst), _cat(link_state), np.array(end_rows, dtype=np.intp)))
         eye_dst, eye_state, eye_value, link_rows, link_columns = [], [], [], [], []
         for i, p in enumerate(self.pieces):
@@ -409,17 +443,17 @@ class Segmented:
             link_rows.append(link_row[i] + np.arange(S))
             link_columns.append(p.column + np.arange(S))
         rows = len(indptr) - 1
-        # every row begins with theta's P columns: their values' places, and the rest's CSR, for fit.lm's JᵀJ
-        wide_at = (indptr[:-1, None].astype(np.intp) + np.arange(P)).astype(np.intp)
+        # every row begins with theta's P columns (fit.lm.WideFirstCSR's dense block); the rest's CSR
         rest = np.ones(len(indices), dtype=bool)
-        rest[wide_at.ravel()] = False
-        split = WideColumns(P, wide_at, np.flatnonzero(rest), (indices[rest] - P).astype(index),
-                            (indptr - P * np.arange(rows + 1)).astype(index))
+        rest[(indptr[:-1, None].astype(np.intp) + np.arange(P)).ravel()] = False
+        link_rows = _cat(link_rows).reshape(-1, S) if S else np.zeros((0, 0), dtype=np.intp)
         self._plan_cache = _Plan(rows, len(indices), indices, indptr, chunks, _cat(eye_dst), _cat(eye_state),
-                          np.concatenate(eye_value) if eye_value else np.zeros(0),
-                          _cat(link_rows).reshape(-1, S) if S else np.zeros((0, 0), dtype=np.intp),
-                          _cat(link_columns).reshape(-1, S) if S else np.zeros((0, 0), dtype=np.intp),
-                          P + S >= DENSE_FRACTION * self.n_x, split)
+                                 np.concatenate(eye_value) if eye_value else np.zeros(0), link_rows,
+                                 _cat(link_columns).reshape(-1, S) if S else np.zeros((0, 0), dtype=np.intp),
+                                 P + S >= DENSE_FRACTION * self.n_x,
+                                 (indptr[link_rows.ravel()].astype(np.intp)[:, None] + np.arange(P)).astype(np.intp),
+                                 np.flatnonzero(rest), (indices[rest] - P).astype(index),
+                                 (indptr - P * np.arange(rows + 1)).astype(index))
         return self._plan_cache
 
     def output_cost(self, x: np.ndarray) -> float:
