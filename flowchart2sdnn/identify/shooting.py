@@ -132,7 +132,8 @@ class _Plan:
     the start's columns in x: ``link_rows``, ``link_columns``, one row per boundary), whether J is handed over
     dense, and how its blocks for fit.lm's JᵀJ are written (theta's columns dense: the continuity rows' ``link_rows``
     from the data at ``link_wide_at``, the output rows by the chunks' groups; the other columns as CSR: the data at
-    ``rest_at``, pattern ``rest_indices``, ``rest_indptr``)."""
+    ``rest_at``, pattern ``rest_indices``, ``rest_indptr``); a dense J's places of the continuity rows' values:
+    ``dense_link_at`` (one array per chunk, as its ``link_src``), ``dense_eye_at``."""
 
     rows: int
     nnz: int
@@ -149,6 +150,8 @@ class _Plan:
     rest_at: np.ndarray
     rest_indices: np.ndarray
     rest_indptr: np.ndarray
+    dense_link_at: list
+    dense_eye_at: np.ndarray
 
 
 def _cat(parts: list) -> np.ndarray:
@@ -322,21 +325,22 @@ class Segmented:
         and the trainer forms JᵀJ from that split without slicing J."""
         x = np.asarray(x, dtype=float)
         plan = self._plan()
+        if plan.dense:
+            return self._fun_dense(x, plan)
         e, data = np.empty(plan.rows), np.empty(plan.nnz)
         n_out, P = self.problem.compiled.n_outputs, self.n_theta
         K, C = n_out + len(self.free), P + len(self.free)
-        wide = None if plan.dense else np.empty((plan.rows, P))  # theta's columns, for fit.lm's JᵀJ
+        wide = np.empty((plan.rows, P))  # theta's columns, for fit.lm's JᵀJ
         ends = []
         for c, y, dy in self._chunk_runs(x, True):
             chunk = plan.chunks[c]
             ends.append(self._fill_outputs(plan, chunk, y, e))
-            for at, row, k, n, width, period, csr_row, rows_per in chunk.groups:  # like pieces: strided copies
+            for at, row, k, n, width, period, csr_row, rows_per, _ in chunk.groups:  # like pieces: strided copies
                 block = dy[row:row + k * n].reshape(k, n, K, C)[:, :, :n_out]
                 np.copyto(data[at:at + k * period].reshape(k, period)[:, :n * n_out * width].reshape(k, n, n_out, width),
                           block[..., :width])
-                if wide is not None:
-                    np.copyto(wide[csr_row:csr_row + k * rows_per].reshape(k, rows_per, P)[:, :n * n_out]
-                              .reshape(k, n, n_out, P), block[..., :P])
+                np.copyto(wide[csr_row:csr_row + k * rows_per].reshape(k, rows_per, P)[:, :n * n_out]
+                          .reshape(k, n, n_out, P), block[..., :P])
             values = dy.ravel()
             # continuity: weight * (end of the previous segment - this start), its Jacobian (the ends' rows here)
             data[chunk.link_dst] = values[chunk.link_src] * self.row_weight[chunk.link_state]
@@ -344,15 +348,37 @@ class Segmented:
         self._fill_links(plan, x, ends, e)
         if not (np.all(np.isfinite(e)) and np.all(np.isfinite(data))):
             return None
-        if plan.dense:
-            # few segments: J is mostly nonzero, and BLAS on the dense matrix beats sparse products (JᵀJ of 10
-            # segments: 1.4 ms dense, 16 ms sparse)
-            return e, sparse.csr_matrix((data, plan.indices, plan.indptr), shape=(plan.rows, self.n_x)).toarray()
         J = WideFirstCSR((data, plan.indices, plan.indptr), shape=(plan.rows, self.n_x))
         wide[plan.link_rows.ravel()] = data[plan.link_wide_at]
         J.wide = wide
         J.rest = sparse.csr_matrix((data[plan.rest_at], plan.rest_indices, plan.rest_indptr),
                                    shape=(plan.rows, self.n_x - P))
+        return e, J
+
+    def _fun_dense(self, x: np.ndarray, plan: _Plan):
+        """:meth:`fun` with J dense, written in place (few segments: J is mostly nonzero, and BLAS on the dense
+        matrix beats sparse products, JᵀJ of 10 segments 1.4 ms dense, 16 ms sparse; the CSR matrix made dense
+        cost 2-3 ms a call)."""
+        n_out, P, S = self.problem.compiled.n_outputs, self.n_theta, len(self.free)
+        K, C = n_out + S, P + S
+        e, J = np.empty(plan.rows), np.zeros((plan.rows, self.n_x))
+        flat = J.ravel()
+        ends = []
+        for c, y, dy in self._chunk_runs(x, True):
+            chunk = plan.chunks[c]
+            ends.append(self._fill_outputs(plan, chunk, y, e))
+            for _, row, k, n, width, _, csr_row, rows_per, column in chunk.groups:
+                block = dy[row:row + k * n].reshape(k, n, K, C)[:, :, :n_out]
+                rows = J[csr_row:csr_row + k * rows_per].reshape(k, rows_per, self.n_x)[:, :n * n_out]
+                rows = rows.reshape(k, n, n_out, self.n_x)
+                rows[..., :P] = block[..., :P]
+                for i in range(k if width > P else 0):  # each piece's own start's columns
+                    rows[i, ..., column + i * S:column + (i + 1) * S] = block[i, ..., P:]
+            flat[plan.dense_link_at[c]] = dy.ravel()[chunk.link_src] * self.row_weight[chunk.link_state]
+        flat[plan.dense_eye_at] = plan.eye_value * self.row_weight[plan.eye_state]
+        self._fill_links(plan, x, ends, e)
+        if not (np.all(np.isfinite(e)) and np.all(np.isfinite(J))):
+            return None
         return e, J
 
     def _fill_outputs(self, plan: _Plan, chunk: _ChunkPlan, y: np.ndarray, e: np.ndarray) -> np.ndarray:
@@ -413,8 +439,8 @@ class Segmented:
                 rows_per = n * n_out + (S if p.column >= 0 else 0)  # its output rows, then its continuity rows
                 if last is not None and last[3:6] == (n, width, period) and last[0] + last[2] * period == out_at[i]:
                     groups[-1] = last[:2] + (last[2] + 1,) + last[3:]
-                else:
-                    groups.append((out_at[i], local, 1, n, width, period, out_row[i], rows_per))
+                else:  # the pieces of a run have consecutive free starts: column + S * (piece in the run)
+                    groups.append((out_at[i], local, 1, n, width, period, out_row[i], rows_per, p.column))
                 after = i + 1
                 if after < len(self.pieces) and self.pieces[after].column >= 0 \
                         and self.pieces[after].record == p.record:
@@ -444,6 +470,11 @@ class Segmented:
             link_columns.append(p.column + np.arange(S))
         rows = len(indptr) - 1
         # every row begins with theta's P columns (fit.lm.WideFirstCSR's dense block); the rest's CSR
+        # the dense J's places of the continuity rows' values (row * n_x + column)
+        entry_row = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
+        dense_at = [entry_row[c.link_dst] * self.n_x + indices[c.link_dst] for c in chunks]
+        eye_at = _cat(eye_dst)
+        dense_eye_at = entry_row[eye_at] * self.n_x + indices[eye_at]
         rest = np.ones(len(indices), dtype=bool)
         rest[(indptr[:-1, None].astype(np.intp) + np.arange(P)).ravel()] = False
         link_rows = _cat(link_rows).reshape(-1, S) if S else np.zeros((0, 0), dtype=np.intp)
@@ -453,7 +484,8 @@ class Segmented:
                                  P + S >= DENSE_FRACTION * self.n_x,
                                  (indptr[link_rows.ravel()].astype(np.intp)[:, None] + np.arange(P)).astype(np.intp),
                                  np.flatnonzero(rest), (indices[rest] - P).astype(index),
-                                 (indptr - P * np.arange(rows + 1)).astype(index))
+                                 (indptr - P * np.arange(rows + 1)).astype(index),
+                                 [a.astype(np.intp) for a in dense_at], dense_eye_at.astype(np.intp))
         return self._plan_cache
 
     def output_cost(self, x: np.ndarray) -> float:
