@@ -320,7 +320,9 @@ def _gram(J) -> np.ndarray:
     """JᵀJ, dense. A CSR J whose columns are partly wide (nonzero in most rows: the parameters of a
     multiple-shooting Jacobian, beside one short column block per segment's free start) is split: the wide
     columns' products by BLAS on their dense copy, the rest sparse; the sparse product of the whole matrix cost
-    8.3 ms, the split 4.8 ms at 250 segments (bench_shooting_iteration, L = 100: a tenth of an iteration)."""
+    8.3 ms, the split 4.8 ms at 250 segments (bench_shooting_iteration, L = 100: a tenth of an iteration). A
+    WideFirstCSR hands both parts over: 2.0 ms, where scipy's column slicing and the count of each column's
+    nonzeros took 7.0 (the same products, the same bits)."""
     if not sparse.issparse(J):
         return J.T @ J
     n = J.shape[1]

@@ -43,7 +43,9 @@ Sensitivities: exact, by the RTRL kernel with the history's own sensitivities (k
 `s_init`): the free starts are extra columns of theta whose initial sensitivity is the identity. Each segment
 is simulated from its own start, the segments of a record in one kernel call (one per thread,
 CompiledNetwork.run_pieces); the Jacobian has segments x free states extra columns, sparse, and the number of
-segments is capped (MAX_SEGMENTS).
+segments is capped (MAX_SEGMENTS). Its nonzero pattern is fixed by the segments: each call only copies the
+kernels' results into place, by strided copies and index arrays built once per stage, and hands theta's columns
+to the trainer dense as well (fit.lm.WideFirstCSR) for JᵀJ.
 
 Layer: identify (below it: fit, network).
 """
@@ -319,10 +321,12 @@ class Segmented:
     def fun(self, x: np.ndarray):
         """(e, J) with J sparse (CSR): a segment's rows have nonzeros in theta's columns and its own start's;
         a continuity row in theta's, the previous start's and its own. The nonzero pattern is fixed by the
-        pieces (:meth:`_plan`), so each call only writes the values, by index arrays built once: building the
-        pattern per call cost 40 % of an iteration at L = 100, writing it piece by piece in Python 10 %
-        (benchmarks/bench_shooting_iteration.py). J is a fit.lm.WideFirstCSR: theta's columns begin every row,
-        and the trainer forms JᵀJ from that split without slicing J."""
+        pieces (:meth:`_plan`), so each call only writes the values, by one strided copy per run of like segments
+        and index arrays built once: building the pattern per call cost 40 % of an iteration at L = 100, writing
+        it segment by segment in Python 4-6 ms a call, by index arrays over all the values 3-4 ms (cache misses
+        on the indices), the strided copies 0.8 ms (benchmarks/bench_shooting_iteration.py). J is a
+        fit.lm.WideFirstCSR: theta's columns, which begin every row, are written dense as well (``wide``), the
+        others as their own CSR (``rest``), and the trainer forms JᵀJ from them without slicing J."""
         x = np.asarray(x, dtype=float)
         plan = self._plan()
         if plan.dense:
@@ -471,17 +475,18 @@ class Segmented:
         rows = len(indptr) - 1
         # every row begins with theta's P columns (fit.lm.WideFirstCSR's dense block); the rest's CSR
         # the dense J's places of the continuity rows' values (row * n_x + column)
-        entry_row = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr))
-        dense_at = [entry_row[c.link_dst] * self.n_x + indices[c.link_dst] for c in chunks]
+        dense = P + S >= DENSE_FRACTION * self.n_x
+        entry_row = np.repeat(np.arange(len(indptr) - 1), np.diff(indptr)) if dense else None
+        dense_at = [entry_row[c.link_dst] * self.n_x + indices[c.link_dst] if dense else _cat([]) for c in chunks]
         eye_at = _cat(eye_dst)
-        dense_eye_at = entry_row[eye_at] * self.n_x + indices[eye_at]
+        dense_eye_at = entry_row[eye_at] * self.n_x + indices[eye_at] if dense else _cat([])
         rest = np.ones(len(indices), dtype=bool)
         rest[(indptr[:-1, None].astype(np.intp) + np.arange(P)).ravel()] = False
         link_rows = _cat(link_rows).reshape(-1, S) if S else np.zeros((0, 0), dtype=np.intp)
         self._plan_cache = _Plan(rows, len(indices), indices, indptr, chunks, _cat(eye_dst), _cat(eye_state),
                                  np.concatenate(eye_value) if eye_value else np.zeros(0), link_rows,
                                  _cat(link_columns).reshape(-1, S) if S else np.zeros((0, 0), dtype=np.intp),
-                                 P + S >= DENSE_FRACTION * self.n_x,
+                                 dense,
                                  (indptr[link_rows.ravel()].astype(np.intp)[:, None] + np.arange(P)).astype(np.intp),
                                  np.flatnonzero(rest), (indices[rest] - P).astype(index),
                                  (indptr - P * np.arange(rows + 1)).astype(index),
