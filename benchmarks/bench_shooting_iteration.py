@@ -54,6 +54,30 @@ Jacobian); timed, draw by draw alternating with the code before (one process per
 trf's seconds per draw (0.50-1.55) against 0.98x (0.74-1.52), a lower ratio on 7 of 8 draws (draw 6: 5.8 s in both),
 sums of seconds 0.95x and 1.12x trf's.
 
+Profiled 27 Nov (the branch shoot2; L = 100, --iterations 20, one thread, per iteration of 6 Jacobians in 5): the
+kernels 44.3 ms (a segmented Jacobian's kernel costs 1.04-1.09x single shooting's: the free start's ninth
+sensitivity column pads the rows from 8 to 12 lanes), writing e and J's values segment by segment in Python 7.0 ms,
+JᵀJ 8.1 ms (6.7 a call: scipy's column slicing 2.5 ms and a count of every column's nonzeros 0.7 ms besides the
+products), the column scale's loop over 257 groups 1.2 ms; single shooting spends 4.6 ms an iteration outside its
+kernels. Fixed, with the same iterates (x, costs and radii bitwise equal at L = 100, 500, 2500, 5 and 20
+iterations, 1 and 2 threads): the CSR pattern's places are built once per stage (runs of like segments copied by
+one strided copy each, index arrays for the continuity rows), theta's columns written dense beside it and the
+other columns as their own CSR for the trainer (fit.lm.WideFirstCSR), so JᵀJ takes no slicing (2.0 ms a call);
+the histories built once per chunk; the column scale's groups by one pass; a dense J (L = 2500) written in place
+instead of CSR then toarray (2.4-3.2 ms a call). Then: fun's own work 4.8 ms an iteration (in the fit: cache
+misses and ~200 page faults a call on its fresh arrays; 1.3 ms a call outside it), JᵀJ 2.5, the column scale 0.3;
+58.6 against 65.6 ms an iteration. What remains is the count of Jacobians (6 in 5 iterations against 11 in 10), the
+kernels' ninth column, and the dense normal equations of 257 quantities (Cholesky factorizations, 2 ms an iteration).
+The segments' first call is now outside the timings (as single shooting's), which matters with --repeat 1 only.
+Measured (three rounds alternating with the code before in the same session, --repeat 2, one thread, load 1.4-1.9,
+another job on one of the 2 cores): --iterations 20: L = 100 1.28-1.31x (before 1.45-1.47x), L = 500 1.18-1.19x
+(1.30-1.35x), L = 2500 1.32-1.35x (1.33-1.37x); --iterations 5: L = 100 1.11-1.16x (1.23-1.32x), L = 500 1.17-1.18x
+(1.26-1.31x), L = 2500 1.36-1.37x (1.38-1.43x); the work of an iteration (one Jacobian, two residuals) 1.06-1.09x at
+every L (before 1.18-1.20x at L = 100). Two threads (one run): --iterations 20 1.23x, 1.16x, 1.35x; --iterations 5
+1.07x, 1.17x, 1.44x (one thread in that run 1.11x, 1.17x, 1.41x). L = 2500 stays highest: its fits refuse more
+trials (14 Jacobians and 8 residuals in 13 iterations against 11 and 1 in 10; with 5 iterations 6 and 4 against 6
+and 1), and its Jacobian is dense, 17 columns against 8, in every product of the trainer.
+
 Run: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_shooting_iteration.py [--seconds 25] [--length 100 --length
 500 --length 2500] [--iterations 5] [--repeat 3] [--threads 2]``.
 """
