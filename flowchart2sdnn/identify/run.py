@@ -51,9 +51,16 @@ from .result import (
     OptimizerTrace,
     RecordInfo,
 )
-from .settings import IDENTIFY_DAMPING, MIN_REL_COST_CHANGE, IdentifySettings
+from .settings import (
+    CRAWL_DECREASE,
+    CRAWL_ITERATIONS,
+    CRAWL_NOISE,
+    IDENTIFY_DAMPING,
+    MIN_REL_COST_CHANGE,
+    IdentifySettings,
+)
 from .shootauto import SUSPECT_PEAK, chaotic_at, choose_shooting, second_look
-from .shooting import kept_stage
+from .shooting import kept_stage, noise_level
 from .workers import fit_start, fit_task, quasi_online_start, run_quasi_online_start, run_start
 
 __all__ = ["IdentifySettings", "Identification", "identify", "lm_options", "with_floor_bias"]
@@ -312,8 +319,12 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
     damping = settings.lm_damping
     if damping == "auto":  # trainlm's where learned curves are fitted (settings.IDENTIFY_DAMPING, LM_BOUNDS)
         damping = "trainlm" if learned else "trust" if bounds == "box" else IDENTIFY_DAMPING
+    m = sum(s.targets.size for s in problem.segments)
+    floor = 0.5 * CRAWL_NOISE ** 2 * noise_level(problem) * m  # the cost E at CRAWL_NOISE x the noise RMS
     return LMOptions(max_iter=settings.max_iter, min_rel_cost_change=MIN_REL_COST_CHANGE, tau=settings.lm_tau,
                      stall_decrease=settings.converged_decrease / max(1, problem.n_residuals),
+                     crawl_decrease=CRAWL_DECREASE / max(1, problem.n_residuals) if floor > 0 else 0.0,
+                     crawl_iterations=CRAWL_ITERATIONS, crawl_cost=floor,
                      scale=settings.lm_scale, scale_groups=groups if settings.lm_scale == "jac" else (),
                      geodesic=settings.lm_geodesic if bounds == "transform" else 0.0, damping=damping,
                      trial_jacobian=damping in ("nielsen", "trust"), bounds=bounds)

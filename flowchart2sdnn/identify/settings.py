@@ -63,6 +63,16 @@ MIN_REL_COST_CHANGE = 1e-10
 #: E/N (N residuals): a change of the cost is told from noise from about E/N on
 #: (one unit of -2 log-likelihood = N dE/E), so 0.01 means "1 % of what the data could ever show".
 CONVERGED_DECREASE = 0.01
+#: ... and, once the residual RMS is within CRAWL_NOISE of the noise read off the records' second differences
+#: (identify.shooting.noise_level), when its last CRAWL_ITERATIONS iterations together lowered E by less than
+#: CRAWL_DECREASE times E/N: one unit of -2 log-likelihood in 100 iterations. A fit at the noise floor that
+#: still creeps is moving along a direction the data barely determine; the three-mass learned chart's draw 9
+#: (benchmarks/bench_rough_init.py, 10 s, seed 1) crept 0.3-0.7 E/N per 100 iterations from iteration 300 to
+#: 1750 (b3 and a curve's slope traded, b3's standard error 6x its value), and a run to 3000 iterations in other
+#: coordinates was still creeping (docs/rough_init.md, "The crawl at the noise floor").
+CRAWL_DECREASE = 1.0
+CRAWL_ITERATIONS = 100
+CRAWL_NOISE = 1.2
 #: identify's (and batch's) multiple shooting by default: "auto" (identify.shootauto) is off wherever a free run of
 #: the chart at its `init` forgets a moved start. The whole test suite with auto as the default, first run: 580
 #: fits, a length chosen in 64 (62 fuzz charts of 39 samples whose start diverges within a sample, the start

@@ -588,7 +588,8 @@ def shooting_fit(problem: Problem, start: np.ndarray, lower, upper, options: LMO
         free = seg.n_x - seg.n_theta
         opts = replace(options, scale_groups=seg.scale_groups(options.scale_groups),
                        max_iter=min(options.max_iter, STAGE_MAX_ITER),
-                       stall_decrease=options.stall_decrease * problem.n_residuals / max(1, m + free))
+                       stall_decrease=options.stall_decrease * problem.n_residuals / max(1, m + free),
+                       crawl_decrease=0.0)  # the crawl rule reads the whole records' cost: the last stage's
         bounds = (np.concatenate([lower, np.full(free, -np.inf)]), np.concatenate([upper, np.full(free, np.inf)]))
 
         def fit(x, seg=seg, opts=opts, bounds=bounds):
