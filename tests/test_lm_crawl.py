@@ -93,3 +93,24 @@ def test_identify_puts_the_ceiling_at_the_records_noise():
     assert opts.crawl_cost == pytest.approx(0.5 * CRAWL_NOISE ** 2 * 0.01 ** 2 * m, rel=0.1)
     assert opts.crawl_iterations == CRAWL_ITERATIONS
     assert opts.crawl_decrease * problem.n_residuals == pytest.approx(CRAWL_DECREASE)
+
+
+def test_identify_says_when_the_crawl_rule_stopped_it(monkeypatch):
+    """The rule made to fire as soon as the fit is at the floor (3 iterations, any gain): the result says so."""
+    import importlib
+
+    run = importlib.import_module("flowchart2sdnn.identify.run")  # the module (the package exports a function)
+    identify = run.identify
+
+    plant = load_diagram(ROOT / "diagrams" / "two_mass_coulomb_plant.yaml")
+    chart = load_diagram(ROOT / "diagrams" / "two_mass_coulomb.yaml")
+    frame = excite(plant, ExcitationSettings(seconds=5.0, seed=3, noise_std=0.01))
+    data = dataset_from_frame(frame, time="time", inputs=list(plant.input_names), outputs=list(plant.output_names))
+    plain = identify(chart, data, settings=IdentifySettings(seed=1))
+    assert plain.converged and not any("creeping" in w for w in plain.warnings)
+    monkeypatch.setattr(run, "CRAWL_ITERATIONS", 3)
+    monkeypatch.setattr(run, "CRAWL_DECREASE", 1e9)
+    ruled = identify(chart, data, settings=IdentifySettings(seed=1))
+    assert ruled.converged and ruled.status == "small_cost_change"
+    assert [w for w in ruled.warnings if w.startswith("converged at the noise floor while still creeping (")]
+    assert ruled.optimizer.iterations < plain.optimizer.iterations

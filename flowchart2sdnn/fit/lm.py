@@ -34,7 +34,7 @@ from .damping import TRAINLM_MU0, first_mu, mu_accepted, mu_refused, nielsen_acc
 from .transforms import Bounds
 
 __all__ = ["LMOptions", "LMResult", "levenberg_marquardt", "damped_step", "STATUS_MESSAGES", "CONVERGED_STATUSES",
-           "WideFirstCSR"]
+           "WideFirstCSR", "CRAWL_DETAIL"]
 
 #: Status code -> message (scipy style).  ``LMResult.message`` starts with one of these.
 STATUS_MESSAGES: dict[str, str] = {
@@ -605,8 +605,7 @@ def levenberg_marquardt(
                 if status is None and _crawls(costs + (new_point.cost,), opt):
                     status = "small_cost_change"
                     gained = (costs[-opt.crawl_iterations] - new_point.cost) / new_point.cost
-                    detail = (f"a crawl at the noise floor: {gained:.3g} of the cost over the last "
-                              f"{opt.crawl_iterations} iterations")
+                    detail = f"{CRAWL_DETAIL}: {gained:.3g} of the cost over the last {opt.crawl_iterations} iterations"
                 if callback is not None and status is None:
                     if callback(iteration + 1, new_point.x.copy(), new_point.cost, mu):
                         status = "callback_stop"
@@ -644,6 +643,10 @@ def levenberg_marquardt(
         rejected_guard=counters.rejected_guard,
         last_guard_reason=counters.last_guard_reason,
     )
+
+
+#: The crawl rule's words in LMResult.message (identify warns on them).
+CRAWL_DETAIL = "a crawl at the noise floor"
 
 
 def _crawls(costs: tuple[float, ...], opt: LMOptions) -> bool:

@@ -29,7 +29,7 @@ from ..diagram.dump import with_values
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..executors import SerialExecutor
-from ..fit.lm import CONVERGED_STATUSES, LMOptions, LMResult
+from ..fit.lm import CONVERGED_STATUSES, CRAWL_DETAIL, LMOptions, LMResult
 from ..fit.multistart import draw_starts, run_multistart
 from .curvestart import curve_start
 from .evidence import assess, no_excitation_message, on_bound_warnings, sqrt_domain_warnings, start_stability
@@ -160,6 +160,10 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     if converged is False and not interrupted:
         warnings.append(f"not converged: {message}; the parameters may be far from the minimum (raise max_iter, "
                         "or start closer)")
+    if converged and CRAWL_DETAIL in message:
+        warnings.append(f"converged at the noise floor while still creeping ({message.split(CRAWL_DETAIL)[1][2:-1]}): "
+                        "the fit moves along a direction the data barely determine; read the parameters with their "
+                        "ci95 and correlations")
     warnings.extend(evidence.warnings)
     if status != "diverged_at_start":
         warnings.extend(sqrt_domain_warnings(problem, x))
