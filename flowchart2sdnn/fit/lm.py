@@ -602,10 +602,10 @@ def levenberg_marquardt(
                     if gained < opt.stall_decrease:
                         status = "small_cost_change"
                         detail = f"{gained:.3g} of the cost over the last {opt.stall_iterations} iterations"
-                if status is None and _crawls(costs + (new_point.cost,), opt):
+                crawled = None if status is not None else _crawl_gain(costs + (new_point.cost,), opt)
+                if crawled is not None:
                     status = "small_cost_change"
-                    gained = (costs[-opt.crawl_iterations] - new_point.cost) / new_point.cost
-                    detail = f"{CRAWL_DETAIL}: {gained:.3g} of the cost over the last {opt.crawl_iterations} iterations"
+                    detail = f"{CRAWL_DETAIL}: {crawled:.3g} of the cost over the last {opt.crawl_iterations} iterations"
                 if callback is not None and status is None:
                     if callback(iteration + 1, new_point.x.copy(), new_point.cost, mu):
                         status = "callback_stop"
@@ -649,11 +649,13 @@ def levenberg_marquardt(
 CRAWL_DETAIL = "a crawl at the noise floor"
 
 
-def _crawls(costs: tuple[float, ...], opt: LMOptions) -> bool:
-    """The crawl rule of :class:`LMOptions` on the costs so far (start, then one per accepted step)."""
+def _crawl_gain(costs: tuple[float, ...], opt: LMOptions) -> float | None:
+    """The crawl rule of :class:`LMOptions` on the costs so far (start, then one per accepted step): the window's
+    gain as a fraction of the cost where the rule ends the fit, else None."""
     if not (0 < opt.crawl_decrease and len(costs) > opt.crawl_iterations and costs[-1] <= opt.crawl_cost):
-        return False
-    return (costs[-1 - opt.crawl_iterations] - costs[-1]) / costs[-1] < opt.crawl_decrease
+        return None
+    gained = (costs[-1 - opt.crawl_iterations] - costs[-1]) / costs[-1]
+    return gained if gained < opt.crawl_decrease else None
 
 
 def _widths(bounds: Bounds, x0: np.ndarray, fraction: float) -> np.ndarray:

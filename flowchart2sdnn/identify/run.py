@@ -161,9 +161,9 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         warnings.append(f"not converged: {message}; the parameters may be far from the minimum (raise max_iter, "
                         "or start closer)")
     if converged and CRAWL_DETAIL in message:
-        warnings.append(f"converged at the noise floor while still creeping ({message.split(CRAWL_DETAIL)[1][2:-1]}): "
-                        "the fit moves along a direction the data barely determine; read the parameters with their "
-                        "ci95 and correlations")
+        gain = message.split(CRAWL_DETAIL + ": ", 1)[-1].rstrip(")")  # "<fraction> of the cost over the last N ..."
+        warnings.append(f"converged at the noise floor while still creeping ({gain}): the fit moves along a "
+                        "direction the data barely determine; read the parameters with their ci95 and correlations")
     warnings.extend(evidence.warnings)
     if status != "diverged_at_start":
         warnings.extend(sqrt_domain_warnings(problem, x))
