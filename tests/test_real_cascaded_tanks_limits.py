@@ -14,16 +14,13 @@ from pathlib import Path
 import numpy as np
 import pytest
 from example_module import load_benchmark
+from realdata import real_dataset
 
 import flowchart2sdnn as sd
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data" / "real" / "cascaded_tanks"
+DATA, pytestmark = real_dataset("cascaded_tanks", "estimation.csv", "cascaded tanks data not present")
 
-pytestmark = [
-    pytest.mark.realdata,
-    pytest.mark.skipif(not (DATA / "estimation.csv").exists(), reason="cascaded tanks data not present"),
-]
 
 
 @pytest.fixture(scope="module")

@@ -15,18 +15,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 from example_module import load_example
+from realdata import real_dataset
 
 import flowchart2sdnn as sd
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data" / "real" / "ced"
+DATA, pytestmark = real_dataset("ced", "unif_1.csv", "CED data not present")
 CHART = ROOT / "diagrams" / "real" / "ced.yaml"
 
-pytestmark = [
-    pytest.mark.realdata,
-    pytest.mark.skipif(not (DATA / "unif_1.csv").exists(), reason="CED data not present"),
-]
 
 
 def _example():

@@ -17,17 +17,14 @@ from pathlib import Path
 import numpy as np
 import pytest
 from example_module import load_example
+from realdata import real_dataset
 
 import flowchart2sdnn as sd
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data" / "real" / "emps"
+DATA, pytestmark = real_dataset("emps", "train.csv", "EMPS data not present")
 
-pytestmark = [
-    pytest.mark.realdata,
-    pytest.mark.skipif(not (DATA / "train.csv").exists(), reason="EMPS data not present"),
-]
 
 
 def _example():

@@ -16,18 +16,15 @@ from pathlib import Path
 import numpy as np
 import pytest
 from paper_example import example
+from realdata import real_dataset
 
 REPO = Path(__file__).resolve().parents[1]
-DATA = REPO.parent / "shared" / "data" / "real" / "uwaterloo_mte360_flexible_drive"
+DATA, pytestmark = real_dataset("uwaterloo_mte360_flexible_drive", None,
+                                "../shared/data/real (the real measured records) is absent")
 CHART = REPO / "diagrams" / "real" / "flexible_drive.yaml"
 MAP_ARGS = ["--map", "u=u_V", "--map", "v1=v1_cart1_mm_s", "--map", "v2=v2_cart2_mm_s"]
 QUANTUM = 4.6592
 LAB_DAMPED_HZ = 2.97
-
-pytestmark = [
-    pytest.mark.realdata,
-    pytest.mark.skipif(not DATA.is_dir(), reason="../shared/data/real (the real measured records) is absent"),
-]
 
 
 def _example():

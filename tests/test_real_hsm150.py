@@ -12,17 +12,14 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from realdata import real_dataset
 
 import flowchart2sdnn as sd
 
 ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data" / "real" / "hsm150_motor_steps"
+DATA, pytestmark = real_dataset("hsm150_motor_steps", "idf_pos_0p06_1.csv", "HSM150 data not present")
 MAP = {"M": "torque_cmd_Nm", "w": "speed_rad_s"}
 
-pytestmark = [
-    pytest.mark.realdata,
-    pytest.mark.skipif(not (DATA / "idf_pos_0p06_1.csv").exists(), reason="HSM150 data not present"),
-]
 
 
 def _read(name):
