@@ -21,7 +21,7 @@ from ..identify.problem import Problem, build_problem, data_init, metrics
 from ..identify.run import Identification, IdentifySettings, identify
 from ..identify.settings import REFIT_TAU
 from ..identify.shootauto import SUSPECT_PEAK, choose_shooting
-from ..identify.shooting import NOISE_MARGIN, noise_level
+from ..identify.shooting import NOISE_MARGIN, noise_cost
 from .effects import Scales
 from .residual import signal_correlation, whiteness
 
@@ -325,7 +325,7 @@ def _training_problem(fitted: Fitted, train: list[Dataset], settings: DiagnoseSe
 
 def _above_noise(fitted: Fitted, problem: Problem, ratio: float) -> bool:
     m = sum(s.targets.size for s in problem.segments)
-    return fitted.cost / max(1, m) > 0.5 * ratio ** 2 * noise_level(problem)  # cost = SSE / 2
+    return fitted.cost / max(1, m) > noise_cost(problem, ratio)
 
 
 def current_problem(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> Problem:

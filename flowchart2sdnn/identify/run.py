@@ -60,7 +60,7 @@ from .settings import (
     IdentifySettings,
 )
 from .shootauto import SUSPECT_PEAK, chaotic_at, choose_shooting, second_look
-from .shooting import kept_stage, noise_level
+from .shooting import kept_stage, noise_cost
 from .workers import fit_start, fit_task, quasi_online_start, run_quasi_online_start, run_start
 
 __all__ = ["IdentifySettings", "Identification", "identify", "lm_options", "with_floor_bias"]
@@ -324,7 +324,7 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
     if damping == "auto":  # trainlm's where learned curves are fitted (settings.IDENTIFY_DAMPING, LM_BOUNDS)
         damping = "trainlm" if learned else "trust" if bounds == "box" else IDENTIFY_DAMPING
     m = sum(s.targets.size for s in problem.segments)
-    floor = 0.5 * CRAWL_NOISE ** 2 * noise_level(problem) * m  # the cost E at CRAWL_NOISE x the noise RMS
+    floor = noise_cost(problem, CRAWL_NOISE) * m  # the cost E at CRAWL_NOISE x the noise RMS
     return LMOptions(max_iter=settings.max_iter, min_rel_cost_change=MIN_REL_COST_CHANGE, tau=settings.lm_tau,
                      stall_decrease=settings.converged_decrease / max(1, problem.n_residuals),
                      crawl_decrease=CRAWL_DECREASE / max(1, problem.n_residuals) if floor > 0 else 0.0,

@@ -45,7 +45,7 @@ import numpy as np
 
 from .initstate import state_neurons
 from .problem import Problem
-from .shooting import GROWTH, MAX_SEGMENTS, NOISE_MARGIN, noise_level, stage_lengths
+from .shooting import GROWTH, MAX_SEGMENTS, NOISE_MARGIN, noise_cost, stage_lengths
 
 __all__ = ["ShootingChoice", "choose_shooting", "amplification", "GROWTH_BOUND", "DELTA", "SHORTER", "SUSPECT_PEAK",
            "second_look", "chaotic_at"]
@@ -160,7 +160,7 @@ def second_look(problem: Problem, choice: ShootingChoice | None, cost: float) ->
     if problem.compiled.estimates_starts or problem.record_params:  # shooting refuses them (FIT006)
         return None
     m = sum(s.targets.size for s in problem.segments)
-    if not cost / max(1, m) > 0.5 * NOISE_MARGIN ** 2 * noise_level(problem):
+    if not cost / max(1, m) > noise_cost(problem, NOISE_MARGIN):
         return None
     total = sum(len(s.inputs) for s in problem.segments)
     length = max(2, -(-total // MAX_SEGMENTS))

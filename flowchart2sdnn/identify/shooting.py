@@ -64,7 +64,8 @@ from .initstate import state_neurons
 from .problem import Problem, _interruptible
 
 __all__ = ["Segmented", "shooting_fit", "stage_lengths", "kept_stage", "MAX_SEGMENTS", "GROWTH", "WEIGHT_GROWTH",
-           "STAGE_MAX_ITER", "MERGE_RISE", "RESEAT_RATIO", "RESEAT_ROUNDS", "reseat", "NOISE_MARGIN", "noise_level"]
+           "STAGE_MAX_ITER", "MERGE_RISE", "RESEAT_RATIO", "RESEAT_ROUNDS", "reseat", "NOISE_MARGIN", "noise_level",
+           "noise_cost"]
 
 #: Segments of one stage at most: the Jacobian has (free states x segments) extra dense columns.
 MAX_SEGMENTS = 256
@@ -552,6 +553,13 @@ def noise_level(problem: Problem) -> float:
     return out / count if count else 0.0
 
 
+def noise_cost(problem: Problem, ratio: float) -> float:
+    """The cost per sample (E over the records' targets, E = SSE / 2) of a residual at `ratio` x the noise RMS
+    (:func:`noise_level`): the one noise floor that multiple shooting, auto's second look, the crawl rule and
+    diagnose compare costs with."""
+    return 0.5 * ratio ** 2 * noise_level(problem)
+
+
 def _state_scale(problem: Problem, theta: np.ndarray, free: np.ndarray) -> np.ndarray:
     """Each free state's RMS over the records' free runs at theta (1 where that says nothing)."""
     if not len(free):
@@ -578,7 +586,7 @@ def shooting_fit(problem: Problem, start: np.ndarray, lower, upper, options: LMO
     carried, stages, scale = None, [], None
     m = sum(s.targets.size for s in problem.segments)
     before = None  # (output cost per sample, the stage's result in theta's terms) of the last accepted stage
-    floor = 0.5 * NOISE_MARGIN ** 2 * noise_level(problem)  # a stage's cost per sample at the noise floor
+    floor = noise_cost(problem, NOISE_MARGIN)  # a stage's cost per sample at the noise floor
     for i, L in enumerate(lengths):
         seg = Segmented(problem, L, WEIGHT_GROWTH ** i, scale, threads, starts)
         if scale is None:  # the states' sizes at the start, kept over the stages (the weights grow alone)
