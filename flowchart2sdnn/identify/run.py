@@ -16,6 +16,7 @@ Layer: identify (below it: simulate's oracle, fit, network, compiler, data, diag
 from __future__ import annotations
 
 import functools
+import math
 import platform
 from collections.abc import Callable, Sequence
 from dataclasses import dataclass, replace
@@ -55,6 +56,7 @@ from .settings import (
     CRAWL_DECREASE,
     CRAWL_ITERATIONS,
     CRAWL_NOISE,
+    FAR_ABOVE_NOISE,
     IDENTIFY_DAMPING,
     MIN_REL_COST_CHANGE,
     IdentifySettings,
@@ -187,6 +189,9 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
 
     chart = _resolved(with_values(diagram, params, curves), problem.network)
     fit, state = _fit(problem, xs, settings, train, more, full, validation)
+    if out.lm is not None and not interrupted and status not in ("no_excitation", "diverged_at_start") and not (
+            shooting and shooting.get("predictable") is False):  # an unpredictable chart already says so
+        warnings.extend(_far_above_noise(problem, fit.train.cost))
     disc = discretization(diagram, problem.network)
     if status == "diverged_at_start":
         disc["floor"] = {"rms": None, "skipped": "the fit diverged at its start"}
@@ -224,6 +229,18 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
                **({"initial_states": {"validation": state.to_dict()}} if state is not None else {}),
                **({"parameters_per_record": per_record} if per_record else {})},
     )
+
+
+def _far_above_noise(problem: Problem, cost: float | None) -> list[str]:
+    """The warning of a free-run training cost whose RMS is more than FAR_ABOVE_NOISE x the records' noise."""
+    m = sum(s.targets.size for s in problem.segments)
+    floor = noise_cost(problem, 1.0) * m  # the cost of a residual at the noise
+    if cost is None or not floor > 0 or not cost > FAR_ABOVE_NOISE ** 2 * floor:
+        return []
+    return [f"the training residual RMS is {math.sqrt(cost / floor):.3g}x the noise read off the records' second "
+            f"differences (a complete chart at its minimum ends within about {FAR_ABOVE_NOISE:g}x): the chart may "
+            "lack an effect (try `sdnn diagnose`) or the fit may sit in a local minimum (try --starts 8, or `init` "
+            "values closer to the machine)"]
 
 
 def with_floor_bias(ident: Identification, train: Sequence[Dataset]) -> Identification:
