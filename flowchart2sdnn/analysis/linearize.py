@@ -132,7 +132,8 @@ def _curve_slope(b: Block, x: float) -> tuple[float, float]:
     a, v = np.asarray(w.a, float), np.asarray(w.v, float)
     bias = np.asarray(w.b, float) if w.b is not None else np.zeros_like(a)
     t = np.tanh(a * x + bias)
-    return float(v @ t), float(np.sum(v * a * (1 - t**2)))
+    c = w.c or 0.0
+    return float(v @ t) + c * x, float(np.sum(v * a * (1 - t**2))) + c
 
 
 def _function_slope(b: Block, k: float, x: float, kink: str) -> tuple[float, float]:

@@ -5,7 +5,8 @@ Which blocks become neurons (the paper's summing junctions):
   y(t) = y(t-1) + T*x(t); its inputs carry the factor T); function -> one neuron with transfer f;
   product -> one linear neuron whose net input is the product of its weighted inputs (MATLAB's netprod), k in
   the first factor's weight;
-  nonlinear -> `neurons` tanh neurons whose output weights v_i sit on the consumers' connections;
+  nonlinear -> `neurons` tanh neurons whose output weights v_i sit on the consumers' connections, and a linear
+  neuron for the tanh basis's linear term c x (diagram.curves: with that basis the slopes a_i are fixed weights);
 - gain, delay and constant blocks are folded: a gain multiplies the connection's coefficient, a delay adds
   samples to its delay, a constant becomes a bias. A folded block that is a chart output gets a linear
   read-out neuron of its own.
@@ -17,11 +18,12 @@ delay block of n samples becomes n*N steps, so the chart means the same in secon
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
 from ..analysis.loops import LoopReport
+from ..diagram.curves import basis_of, basis_weights, learned_roles
 from ..diagram.model import Block, Diagram
 from ..errors import SdnnError
 from ..expr import Expr, Num, const, mul, neg
@@ -77,17 +79,23 @@ class DiscreteChart:
     outputs: tuple[tuple[str, str, int], ...]  # (output signal, neuron block, neuron index)
 
 
-def initial_nonlinear_weights(block: Block, seed: int, position: int) -> dict[str, np.ndarray]:
-    """Stored weights when the chart has them, else uniform draws in init_range (seeded per block position)."""
+def initial_nonlinear_weights(block: Block, seed: int, position: int,
+                              diagram: Diagram | None = None) -> dict[str, np.ndarray]:
+    """Stored weights when the chart has them; for the tanh basis the flat curve over the chart's `span` (1
+    until a fit sets it from the data); for the paper's neurons uniform draws in init_range (seeded per block
+    position)."""
     s = block.neurons or 3
+    if block.weights is None and basis_of(block) == "tanh" and diagram is not None:
+        block = replace(block, weights=basis_weights(diagram, block, block.span or 1.0))
     if block.weights is not None:
         w = block.weights
-        return {"a": np.array(w.a), "v": np.array(w.v), "b": np.array(w.b) if w.b is not None else np.zeros(s)}
+        return {"a": np.array(w.a), "v": np.array(w.v), "b": np.array(w.b) if w.b is not None else np.zeros(s),
+                "c": None if w.c is None else float(w.c)}
     lo, hi = block.init_range or (-0.5, 0.5)
     rng = np.random.default_rng([seed, position])
     a, v = rng.uniform(lo, hi, s), rng.uniform(lo, hi, s)
     b = rng.uniform(lo, hi, s) if block.bias else np.zeros(s)
-    return {"a": a, "v": v, "b": b}
+    return {"a": a, "v": v, "b": b, "c": None}
 
 
 def output_scale(b: Block) -> float:
@@ -120,8 +128,11 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int
             if b.kind in _SINGLE:
                 return [Connection(Source("neuron", b.name), mul(coef, const(output_scale(b))), delay, None, path)]
             if b.kind == "nonlinear":
-                return [Connection(Source("neuron", b.name, i), coef, delay, f"{b.name}.v{i + 1}", path)
-                        for i in range(b.neurons)]
+                out = [Connection(Source("neuron", b.name, i), coef, delay, f"{b.name}.v{i + 1}", path)
+                       for i in range(b.neurons)]
+                if linear_term[b.name]:  # the linear term: a linear neuron after the tanh ones
+                    out.append(Connection(Source("neuron", b.name, b.neurons), coef, delay, f"{b.name}.c", path))
+                return out
             if b.kind == "constant":
                 return [Connection(Source("bias", b.name), mul(coef, b.k), 0, None, path)]
             if b.name in folded:  # a loop of gains and delays only: no neuron to carry its state
@@ -167,6 +178,9 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int
             out.extend(conns)
         return tuple(out)
 
+    initial = {b.name: initial_nonlinear_weights(b, seed, rank.get(b.name, 0), diagram)
+               for b in diagram.blocks if b.kind == "nonlinear"}
+    linear_term = {name: w["c"] is not None for name, w in initial.items()}
     neuron_blocks: list[NeuronBlock] = []
     free: list[tuple[str, str, str, float, bool]] = []
     T = const(diagram.sample_time / substeps)  # the step h; exactly T when substeps is 1
@@ -186,7 +200,8 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int
         elif b.kind == "product":
             neuron_blocks.append(NeuronBlock(b.name, b.kind, ("linear",), (factors(b),), net_input="prod"))
         elif b.kind == "nonlinear":
-            w = initial_nonlinear_weights(b, seed, rank.get(b.name, 0))
+            w = initial[b.name]
+            learned = learned_roles(b)
             (base,) = [terms_of(b, const(1.0))]
             if any(c.free is not None for c in base):
                 raise SdnnError.at(
@@ -201,11 +216,16 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int
                 if b.bias:
                     conns += (Connection(Source("bias", b.name), const(1.0), 0, f"{b.name}.b{i + 1}", (b.name,)),)
                 per_neuron.append(conns)
-                free.append((f"{b.name}.a{i + 1}", b.name, "a", float(w["a"][i]), bool(b.fixed)))
-                free.append((f"{b.name}.v{i + 1}", b.name, "v", float(w["v"][i]), bool(b.fixed)))
+                free.append((f"{b.name}.a{i + 1}", b.name, "a", float(w["a"][i]), "a" not in learned))
+                free.append((f"{b.name}.v{i + 1}", b.name, "v", float(w["v"][i]), "v" not in learned))
                 if b.bias:
-                    free.append((f"{b.name}.b{i + 1}", b.name, "b", float(w["b"][i]), bool(b.fixed)))
-            neuron_blocks.append(NeuronBlock(b.name, b.kind, ("tanh",) * b.neurons, tuple(per_neuron)))
+                    free.append((f"{b.name}.b{i + 1}", b.name, "b", float(w["b"][i]), "b" not in learned))
+            transfers = ("tanh",) * b.neurons
+            if linear_term[b.name]:  # c x: a linear neuron fed by the input as it is, c on its consumers
+                per_neuron.append(base)
+                transfers += ("linear",)
+                free.append((f"{b.name}.c", b.name, "c", float(w["c"]), "c" not in learned))
+            neuron_blocks.append(NeuronBlock(b.name, b.kind, transfers, tuple(per_neuron)))
 
     outputs = []
     for s in diagram.outputs:

@@ -47,7 +47,8 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Protocol, runtime_checkable
 
-from ..diagram.model import Block, Diagram, NonlinearWeights, Parameter, Term
+from ..diagram.curves import BASIS_FUNCTIONS, basis_weights
+from ..diagram.model import Block, Diagram, Parameter, Term
 from ..errors import SdnnError, did_you_mean
 from ..expr import parse_expr
 from .graph import (
@@ -111,6 +112,14 @@ class Scales:
         value = float(self.rms.get(signal, 1.0))
         return value if value > 0 else 1.0
 
+    def span(self, signal: str) -> float:
+        """The largest |value| of the signal (a learned curve's basis spans it); 3 RMS where unknown."""
+        if signal in self.lo and signal in self.hi:
+            value = max(abs(float(self.lo[signal])), abs(float(self.hi[signal])))
+            if value > 0 and math.isfinite(value):
+                return value
+        return 3.0 * self.scale(signal)
+
 
 @runtime_checkable
 class Effect(Protocol):
@@ -139,12 +148,18 @@ def _sum_terms(place: Place, signal: str) -> dict[str, tuple[Term, ...]]:
     return terms
 
 
-def _curve(name: str, at: str, slopes: Sequence[float], scale: float, bias: bool,
-           description: str) -> Block:
-    """A nonlinear block of `at` whose output is zero (v = 0) and whose neurons span the signal's range."""
-    a = tuple(float(s) / scale for s in slopes)
-    return Block(name, "nonlinear", (Term(at),), description=description, neurons=len(a), bias=bias,
-                 weights=NonlinearWeights(a, (0.0,) * len(a), (0.0,) * len(a) if bias else None))
+def _curve(name: str, at: str, span: float, description: str) -> Block:
+    """A learned curve of `at` (the tanh basis over +-span, diagram.curves) whose weights are set once it sits in
+    its chart (:func:`_seat_curve`: whether it has a linear term depends on what it is summed with)."""
+    return Block(name, "nonlinear", (Term(at),), description=description, neurons=BASIS_FUNCTIONS, basis="tanh",
+                 span=span)
+
+
+def _seat_curve(diagram: Diagram, name: str) -> Diagram:
+    """The chart with curve `name` flat (v = 0, c = 0: neutral) over its span."""
+    return replace(diagram, blocks=tuple(
+        replace(b, weights=basis_weights(diagram, b, b.span or 1.0)) if b.name == name else b
+        for b in diagram.blocks))
 
 
 _namer = namer  # fresh names for a patch's new blocks and parameters
@@ -240,9 +255,9 @@ class Physical:
 class Friction:
     """Friction of a speed against the motion: a learned curve ``sum v_i tanh(a_i w + b_i)`` or physical terms.
 
-    Two options per speed. The learned curve: neurons that start with v = 0 (neutral) and slopes
-    ``a_i = slopes[i] / rms(w)`` from nearly a sign function to nearly linear, so that the curve can bend into
-    a Stribeck bump; the biases make it asymmetric. The physical option (:class:`Physical`, when `physical`
+    Two options per speed. The learned curve: the tanh basis of diagram.curves over the speed's range, flat at
+    the start (v = 0, neutral), fixed slopes from nearly a sign function to nearly linear, so that the curve can
+    bend into a Stribeck bump and enters the fit linearly. The physical option (:class:`Physical`, when `physical`
     is set): :class:`Coulomb`'s ``Fc sign_smooth(w) + c + dFv max(w, 0)`` with three named parameters. Both
     are scored; the refit set takes the better-scored option of each place, and the other one as a runner-up
     when friction at that speed is the best place; the refits decide (validation RMS, within a tie the
@@ -250,7 +265,6 @@ class Friction:
     second option never pushes another place out of the refit set.
     """
 
-    slopes: tuple[float, ...] = (100.0, 20.0, 4.0, 0.8)
     physical: Coulomb | None = Coulomb()
     name: str = "friction"
     neutral: bool = True
@@ -261,18 +275,18 @@ class Friction:
 
     def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
         scale = scales.scale(place.at)
-        return (scale,) + ((Physical(scale),) if self.physical is not None else ())
+        return (scales.span(place.at),) + ((Physical(scale),) if self.physical is not None else ())
 
     def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
         if isinstance(option, Physical):
             return (self.physical or Coulomb()).patch(diagram, place, option.scale)
-        scale = float(option) if option else 1.0
+        span = float(option) if option else 1.0
         name = fresh_name(diagram, f"fric_{place.at}")
-        block = _curve(name, place.at, self.slopes, scale, True, f"friction of {place.at} (diagnose)")
-        return add_terms(add_blocks(diagram, [block]), _sum_terms(place, name))
+        block = _curve(name, place.at, span, f"friction of {place.at} (diagnose)")
+        return _seat_curve(add_terms(add_blocks(diagram, [block]), _sum_terms(place, name)), name)
 
     def describe(self) -> str:
-        text = f"friction: a learned curve of a speed ({len(self.slopes)} tanh neurons with bias) against the motion"
+        text = "friction: a learned curve of a speed (the tanh basis over its range) against the motion"
         return text + (", or Coulomb + offset + one-sided viscous terms with physical parameters"
                        if self.physical is not None else "")
 
@@ -541,10 +555,10 @@ class DeadZone:
 
 @dataclass(frozen=True)
 class Backlash:
-    """Backlash as the issue defines it: the spring torque ``c x`` becomes ``c x + sum v_i tanh(a_i x)`` (odd,
-    v = 0 at the start), a learned curve that can form a dead zone (or a hardening or softening spring)."""
+    """Backlash: the spring torque ``c x`` becomes ``c x + sum v_i tanh(a_i x)`` (odd, the tanh basis over the
+    angle's range, v = 0 at the start), a learned curve that can form a dead zone (or a hardening or softening
+    spring)."""
 
-    slopes: tuple[float, ...] = (20.0, 5.0, 1.5)
     name: str = "backlash"
     neutral: bool = True
     extra_dof: int = 0
@@ -553,14 +567,14 @@ class Backlash:
         return spring_angles(diagram)
 
     def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
-        return (scales.scale(place.at),)
+        return (scales.span(place.at),)
 
     def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
-        scale = float(option) if option else 1.0
+        span = float(option) if option else 1.0
         spring = diagram.block(place.via)
         lin = fresh_name(diagram, f"{spring.name}_lin")
         curve = fresh_name(diagram, f"bl_{place.at}", {lin})
-        block = _curve(curve, place.at, self.slopes, scale, False, f"backlash of {place.at} (diagnose)")
+        block = _curve(curve, place.at, span, f"backlash of {place.at} (diagnose)")
         blocks = []
         for b in diagram.blocks:
             if b.name == spring.name:
@@ -569,7 +583,7 @@ class Backlash:
                                     description="spring torque with backlash (diagnose)"))
             else:
                 blocks.append(b)
-        return add_blocks(replace(diagram, blocks=tuple(blocks)), [block])
+        return _seat_curve(add_blocks(replace(diagram, blocks=tuple(blocks)), [block]), curve)
 
     def describe(self) -> str:
         return "backlash: the spring torque becomes c*x plus a learned odd curve of the shaft angle"

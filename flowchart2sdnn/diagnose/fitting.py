@@ -217,11 +217,9 @@ def _identify(diagram: Diagram, train: list[Dataset], settings: DiagnoseSettings
               progress: Progress | None = None) -> Identification:
     # floor_bias off: diagnose compares costs and validation RMS, never the intervals, over many refits
     full = max_iter >= settings.max_iter
-    # trainlm's damping and the bound transform: diagnose's brief refits and benches were measured with them
-    # (identify.settings.LM_DAMPING, LM_BOUNDS)
+    # the optimiser identify uses (its damping and bounds chosen by what the chart fits, identify.settings)
     s = IdentifySettings(max_iter=max_iter, seed=settings.seed, alignment=settings.alignment, lm_tau=settings.lm_tau,
-                         floor_bias=False, shooting=settings.shooting if full else "off", lm_damping="trainlm",
-                         lm_bounds="transform")
+                         floor_bias=False, shooting=settings.shooting if full else "off")
     return identify(diagram, train if len(train) > 1 else train[0], None, s, progress)
 
 

@@ -48,6 +48,7 @@ from scipy.linalg import eigh
 from scipy.stats import chi2
 
 from ..data.csvdata import Dataset
+from ..diagram.curves import weight_names
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify.problem import Problem, build_problem
@@ -235,8 +236,7 @@ def new_quantities(before: Diagram, after: Diagram) -> tuple[str, ...]:
     old_b = set(before.block_names)
     for b in after.blocks:
         if b.kind == "nonlinear" and b.name not in old_b and not b.fixed:
-            for i in range(1, (b.neurons or 0) + 1):
-                names += [f"{b.name}.a{i}", f"{b.name}.v{i}"] + ([f"{b.name}.b{i}"] if b.bias else [])
+            names += weight_names(after, b)
     return tuple(names)
 
 

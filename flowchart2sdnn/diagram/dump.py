@@ -10,6 +10,7 @@ from dataclasses import replace
 
 import yaml
 
+from .curves import basis_of
 from .model import Block, Diagram, NonlinearWeights
 
 __all__ = ["dump_diagram", "with_values"]
@@ -38,6 +39,11 @@ def _block_dict(b: Block) -> dict:
             d["eps"] = _yaml_number(b.eps)
     if b.kind == "nonlinear":
         d["neurons"] = b.neurons
+        d["basis"] = basis_of(b)
+        if b.linear is not None:
+            d["linear"] = bool(b.linear)
+        if b.span is not None:
+            d["span"] = _yaml_number(b.span)
         if b.bias:
             d["bias"] = True
         if b.init_range not in (None, (-0.5, 0.5)):
@@ -48,6 +54,8 @@ def _block_dict(b: Block) -> dict:
             w = {"a": [float(x) for x in b.weights.a], "v": [float(x) for x in b.weights.v]}
             if b.weights.b is not None and b.bias:
                 w["b"] = [float(x) for x in b.weights.b]
+            if b.weights.c is not None:
+                w["c"] = float(b.weights.c)
             d["weights"] = w
     if b.unit:
         d["unit"] = b.unit
@@ -117,7 +125,8 @@ def with_values(diagram: Diagram, parameters: Mapping[str, float], nonlinear: Ma
         if b.kind == "nonlinear" and b.name in nonlinear:
             w = nonlinear[b.name]
             b = replace(b, weights=NonlinearWeights(tuple(w["a"]), tuple(w["v"]),
-                                                    tuple(w["b"]) if w.get("b") is not None else None),
+                                                    tuple(w["b"]) if w.get("b") is not None else None,
+                                                    None if w.get("c") is None else float(w["c"])),
                         fixed=bool(b.fixed or fix))
         blocks.append(b)
     return replace(diagram, parameters=tuple(params), blocks=tuple(blocks))

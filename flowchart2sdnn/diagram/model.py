@@ -85,11 +85,13 @@ class Term:
 
 @dataclass(frozen=True)
 class NonlinearWeights:
-    """Learned weights of a `nonlinear` block: y = sum_i v_i * tanh(a_i * x + b_i)."""
+    """Weights of a `nonlinear` block: y = sum_i v_i * tanh(a_i * x + b_i) + c * x (c: the linear term, None
+    when the curve has none)."""
 
     a: tuple[float, ...]
     v: tuple[float, ...]
     b: tuple[float, ...] | None = None
+    c: float | None = None
 
 
 @dataclass(frozen=True)
@@ -118,6 +120,13 @@ class Block:
     init_range: tuple[float, float] | None = None
     fixed: bool | None = None
     weights: NonlinearWeights | None = None
+    # "tanh": fixed slopes spanning the input's range, output weights (and the linear term) learned, so the
+    # curve enters the fit linearly; "neurons": the paper's free-slope tanh neurons (diagram.curves)
+    basis: str | None = None
+    # the linear term c*x: None decides by the chart (off where a gain of the same input sits in the same sum)
+    linear: bool | None = None
+    # the half-width of the input range the basis spans; None takes it from the data at fit time
+    span: float | None = None
     # function
     f: str | None = None
     eps: float | None = None

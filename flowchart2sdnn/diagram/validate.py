@@ -15,6 +15,7 @@ from pathlib import Path
 
 from ..errors import Diagnostic, Location, SdnnError, did_you_mean
 from ..expr import ExprError, parse_expr
+from .curves import BASES, BASIS_FUNCTIONS, DEFAULT_BASIS
 from .initestimate import ESTIMATE, expand_estimated_inits
 from .model import (
     BLOCK_KINDS,
@@ -50,7 +51,7 @@ BLOCK_KEYS: dict[str, tuple[str, ...]] = {
     "integrator": ("in", "init", "measured_by"),
     "delay": ("in", "n"),
     "constant": ("k",),
-    "nonlinear": ("in", "neurons", "bias", "init_range", "fixed", "weights"),
+    "nonlinear": ("in", "neurons", "basis", "linear", "span", "bias", "init_range", "fixed", "weights"),
     "function": ("in", "f", "k", "eps"),
     "product": ("in", "k"),
 }
@@ -407,6 +408,29 @@ class _Validator:
                        path + ("init_range",), name)
             rng = [-0.5, 0.5]
         fields["init_range"] = (float(rng[0]), float(rng[1]))
+        basis = spec.get("basis", DEFAULT_BASIS)
+        if basis not in BASES:
+            self.error("CHART004", f"'basis' must be one of {', '.join(BASES)}, found {_show(basis)}",
+                       path + ("basis",), name, did_you_mean(str(basis), BASES))
+            basis = DEFAULT_BASIS
+        fields["basis"] = basis
+        if basis != "neurons":  # the basis has its own density; `neurons` counts the paper's free neurons
+            weights = spec.get("weights")
+            given = weights.get("a") if isinstance(weights, dict) else None
+            neurons = len(given) if isinstance(given, list) and 1 <= len(given) <= MAX_NEURONS else BASIS_FUNCTIONS
+            fields["neurons"] = neurons
+        if "linear" in spec and spec["linear"] is not None:
+            fields["linear"] = self.flag(spec, "linear", path, name)
+            if basis == "neurons" and fields["linear"]:
+                self.error("CHART004", "'linear: true' needs the tanh basis (the paper's neurons have no linear "
+                           "term)", path + ("linear",), name)
+        if "span" in spec and spec["span"] is not None:
+            span = spec["span"]
+            if not _finite_number(span) or not span > 0:
+                self.error("CHART004", f"'span' must be a positive number (the half-width of the input range), "
+                           f"found {_show(span)}", path + ("span",), name)
+            else:
+                fields["span"] = float(span)
         weights = spec.get("weights")
         if weights is None:
             return
@@ -414,7 +438,12 @@ class _Validator:
         if not isinstance(weights, dict):
             self.error("CHART004", "'weights' must be a mapping {a: [...], v: [...], b: [...]}", wpath, name)
             return
-        self.unknown_keys(weights, ("a", "v", "b"), wpath, "nonlinear weights", name)
+        self.unknown_keys(weights, ("a", "v", "b", "c"), wpath, "nonlinear weights", name)
+        c = weights.get("c")
+        if c is not None and not _finite_number(c):
+            self.error("CHART004", f"weights 'c' (the linear term) must be a number, found {_show(c)}",
+                       wpath + ("c",), name)
+            return
         vectors = {}
         for key in ("a", "v", "b"):
             if key not in weights:
@@ -433,7 +462,8 @@ class _Validator:
             return
         if fields["bias"] and "b" not in vectors:
             vectors["b"] = (0.0,) * neurons
-        fields["weights"] = NonlinearWeights(vectors["a"], vectors["v"], vectors.get("b"))
+        fields["weights"] = NonlinearWeights(vectors["a"], vectors["v"], vectors.get("b"),
+                                             None if c is None else float(c))
 
     def terms(self, spec: Mapping, path: tuple, name: str, many: bool) -> tuple[Term, ...]:
         if "in" not in spec:

@@ -31,10 +31,11 @@ from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq, solve_triang
 
 from .boxstep import feasible_step
 from .damping import TRAINLM_MU0, first_mu, mu_accepted, mu_refused, nielsen_accepted, nielsen_refused
+from .effective import effective_samples
 from .transforms import Bounds
 
 __all__ = ["LMOptions", "LMResult", "levenberg_marquardt", "damped_step", "STATUS_MESSAGES", "CONVERGED_STATUSES",
-           "WideFirstCSR", "CRAWL_DETAIL"]
+           "WideFirstCSR", "CRAWL_DETAIL", "gauss_newton_gain"]
 
 #: Status code -> message (scipy style).  ``LMResult.message`` starts with one of these.
 STATUS_MESSAGES: dict[str, str] = {
@@ -49,12 +50,16 @@ STATUS_MESSAGES: dict[str, str] = {
                          "iteration, or below `stall_decrease` over the last `stall_iterations`, or, at the noise floor "
                          "(`crawl_cost`), below `crawl_decrease` over the last `crawl_iterations` (or, with the "
                          "trust radius, the model's best decrease is below the cost's rounding)",
+    "negligible_gain": "what is left to gain is negligible: the Gauss-Newton step would lower -2 log-likelihood "
+                       "by less than `negligible_gain` units at the residual's own variance, and so did the last "
+                       "step",
     "callback_stop": "stopped by the callback",
     "interrupted": "interrupted (KeyboardInterrupt); the best point so far is returned",
 }
 
 #: Statuses that mean "a (local) minimum was reached" rather than "stopped early".
-CONVERGED_STATUSES = frozenset({"min_grad", "cost_goal", "mu_max", "small_step", "small_cost_change"})
+CONVERGED_STATUSES = frozenset({"min_grad", "cost_goal", "mu_max", "small_step", "small_cost_change",
+                                "negligible_gain"})
 
 
 @dataclass(frozen=True)
@@ -88,6 +93,16 @@ class LMOptions:
     along a direction the data barely determine (a learned curve's slope traded against a viscous term: the
     three-mass learned chart's draw 9 gained 0.3-0.7 E/N per 100 iterations for more than 1000 iterations,
     above the stall rule's 0.1, with its cost within 1 % of the noise's).
+
+    ``negligible_gain`` > 0 ends a fit as converged ("negligible_gain") wherever it is, at the noise floor or
+    far above it, once the undamped Gauss-Newton step predicts a fall of -2 log-likelihood below that many units
+    at the residual's own variance (m dE / E for m residuals: the Newton decrement, the step's length in the
+    metric of the parameters' covariance, so it is blind to units and scaling) and the last accepted step
+    gained less than that too. Quantities the step pushes against a bound they are within one standard error
+    of (box bounds) are held there for the prediction. ``residual_stride`` > 0 (the residual laid out as rows of
+    that many outputs) counts the residual's independent samples (:mod:`.effective`: its length over its
+    autocorrelation time) instead of its entries: a residual that is mostly a missing effect or coloured noise
+    weighs a fall of the cost by what it holds.
 
     ``damping = "nielsen"`` moves mu by the gain ratio rho of each accepted step (actual over predicted decrease):
     ``mu *= max(1/3, 1 - (2 rho - 1)^3)``, and by 2, 4, 8, ... on refusals in a row (:mod:`.damping`);
@@ -128,6 +143,8 @@ class LMOptions:
     crawl_decrease: float = 0.0
     crawl_iterations: int = 100
     crawl_cost: float = math.inf
+    negligible_gain: float = 0.0
+    residual_stride: int = 0
     max_mu_tries: int = 20
     mu_min: float = 1e-20
     tau: float = 0.0
@@ -155,6 +172,7 @@ class LMOptions:
             "min_rel_cost_change",
             "stall_decrease",
             "crawl_decrease",
+            "negligible_gain",
             "mu_min",
             "tau",
         ):
@@ -573,6 +591,13 @@ def levenberg_marquardt(
             if mu > opt.mu_max and opt.damping != "trust":
                 status = "mu_max"
                 break
+            if opt.negligible_gain > 0 and len(costs) > 1:
+                units = _negligible(point, A, g, costs, box, opt.negligible_gain, opt.residual_stride)
+                if units is not None:
+                    status = "negligible_gain"
+                    detail = (f"{units[0]:.3g} units left by Gauss-Newton, {units[1]:.3g} gained by the last "
+                              "step")
+                    break
             if opt.scale == "jac":
                 col = _column_scale(Ju, col, opt.scale_groups, A)
             if opt.damping == "trust" and not math.isfinite(mu):  # the first radius: the start's scaled size
@@ -643,6 +668,48 @@ def levenberg_marquardt(
         rejected_guard=counters.rejected_guard,
         last_guard_reason=counters.last_guard_reason,
     )
+
+
+def gauss_newton_gain(A: np.ndarray, g: np.ndarray, x: np.ndarray | None = None, box: Bounds | None = None,
+                      sigma2: float = 1.0) -> float:
+    """1/2 gᵀA⁺g, the cost E's fall the undamped Gauss-Newton step predicts, with quantities that the step
+    pushes against a box bound closer than one standard error (sqrt(sigma2 (A⁺)_ii)) held at it."""
+    d = np.sqrt(np.clip(np.diag(A), 0.0, None))
+    d = np.where(d > 0, d, 1.0)
+    As, gs = A / np.outer(d, d), g / d
+    free = np.ones(g.size, dtype=bool)
+    for _ in range(3):
+        idx = np.flatnonzero(free)
+        if idx.size == 0:
+            return 0.0
+        w, V = np.linalg.eigh(As[np.ix_(idx, idx)])
+        keep = w > max(float(w.max()), 0.0) * 1e-12
+        inv = (V[:, keep] / w[keep]) @ V[:, keep].T
+        ys = inv @ gs[idx]
+        if box is None or x is None:
+            break
+        step, se = ys / d[idx], np.sqrt(np.clip(sigma2 * np.diag(inv), 0.0, None)) / d[idx]
+        xi, lo, hi = x[idx], box.lower[idx], box.upper[idx]
+        held = ((xi + step < lo) & (xi - lo < se)) | ((xi + step > hi) & (hi - xi < se))
+        if not held.any():
+            break
+        free[idx[held]] = False
+    return 0.5 * float(gs[idx] @ ys)
+
+
+def _negligible(point: _Point, A, g, costs, box, limit: float, stride: int) -> tuple[float, float] | None:
+    """The negligible-gain rule of :class:`LMOptions`: (units left, units last gained) where it ends the fit."""
+    m = point.e.size
+    if not point.cost > 0 or m == 0:
+        return None
+    if stride > 0:  # a correlated residual holds fewer independent samples than it has entries
+        m = effective_samples(point.e, stride)
+    unit = point.cost / m  # one unit of -2 log-likelihood in E, at the residual's own variance
+    gained = (costs[-2] - costs[-1]) / unit
+    if gained >= limit:
+        return None
+    left = gauss_newton_gain(A, g, point.x, box, 2.0 * unit) / unit
+    return (left, gained) if left < limit else None
 
 
 #: The crawl rule's words in LMResult.message (identify warns on them).

@@ -78,7 +78,8 @@ def to_document(ident: Identification) -> dict:
                            "ci95_noise": None if e.ci95_noise is None else list(e.ci95_noise)}
                        for n, e in ident.parameters.items()},
         "nonlinear": {b: {"a": list(c.a), "v": list(c.v), **({"b": list(c.b)} if c.b is not None else {}),
-                          "fixed": c.fixed} for b, c in ident.curves.items()},
+                          **({"c": c.c} if c.c is not None else {}), "fixed": c.fixed}
+                      for b, c in ident.curves.items()},
         "fit": {"train": _metrics(ident.fit.train),
                 "validation": None if ident.fit.validation is None else _metrics(ident.fit.validation)},
         "warnings": list(ident.warnings),
@@ -173,7 +174,8 @@ def from_document(doc: dict, chart: Diagram | None = None) -> Identification:
                                 p["fixed"], _tuple(p.get("ci95_noise", p["ci95"])))  # older files: noise only
                     for n, p in doc["parameters"].items()},
         curves={b: Curve(tuple(map(_nan, c["a"])), tuple(map(_nan, c["v"])),
-                         None if c.get("b") is None else tuple(map(_nan, c["b"])), c["fixed"])
+                         None if c.get("b") is None else tuple(map(_nan, c["b"])), c["fixed"],
+                         None if c.get("c") is None else _nan(c["c"]))
                 for b, c in doc["nonlinear"].items()},
         fit=Fit(_read_metrics(fit["train"]), None if fit["validation"] is None else _read_metrics(fit["validation"])),
         warnings=tuple(w for w in doc["warnings"] if not w.startswith(_NON_FINITE)),

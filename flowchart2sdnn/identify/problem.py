@@ -218,8 +218,14 @@ def columns_of(data: Dataset, names) -> np.ndarray:
 
 def build_problem(diagram: Diagram, data: Dataset, alignment: str = "zoh", seed: int = 0,
                   network: Network | None = None, more: Sequence[Dataset] = ()) -> Problem:
-    """Compile `diagram` (unless `network` is given) and align `data` (and the records in `more`) to it."""
+    """Compile `diagram` (unless `network` is given) and align `data` (and the records in `more`) to it.
+
+    Learned curves of the tanh basis without slopes get them over their input's range in the records
+    (identify.curvespan); the problem's `diagram` is the chart with them."""
     if network is None:
+        from .curvespan import with_spans  # curvespan compiles and runs the chart as this module does
+
+        diagram, _ = with_spans(diagram, (data, *more), alignment)
         network = compile_diagram(diagram, seed=seed).network
     first = _one_problem(diagram, network, CompiledNetwork(network), data, alignment)
     extra = tuple(Segment(p.inputs, p.targets, p.init)

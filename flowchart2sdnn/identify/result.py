@@ -47,21 +47,25 @@ class Estimate:
 
 @dataclass(frozen=True)
 class Curve:
-    """A learned static curve (a `nonlinear` block): y = sum v_i tanh(a_i x + b_i)."""
+    """A learned static curve (a `nonlinear` block): y = sum v_i tanh(a_i x + b_i) + c x (c None: no linear
+    term)."""
 
     a: tuple[float, ...]
     v: tuple[float, ...]
     b: tuple[float, ...] | None
     fixed: bool
+    c: float | None = None
 
     @property
     def slope_at_zero(self) -> float:
-        return float(sum(a * v for a, v in zip(self.a, self.v, strict=True)))
+        b = self.b if self.b is not None else (0.0,) * len(self.a)
+        return float(sum(a * v * (1.0 - np.tanh(bb) ** 2) for a, v, bb in zip(self.a, self.v, b, strict=True))
+                     + (self.c or 0.0))
 
     def __call__(self, x: np.ndarray | float) -> np.ndarray:
-        x = np.asarray(x, dtype=float)[..., None]
+        x = np.asarray(x, dtype=float)
         b = np.asarray(self.b if self.b is not None else np.zeros(len(self.a)))
-        return np.tanh(x * np.asarray(self.a) + b) @ np.asarray(self.v)
+        return np.tanh(x[..., None] * np.asarray(self.a) + b) @ np.asarray(self.v) + (self.c or 0.0) * x
 
 
 @dataclass(frozen=True)

@@ -25,6 +25,7 @@ import numpy as np
 
 from .._version import __version__
 from ..analysis.loops import delay_rule
+from ..compiler.substeps import AUTO_CAP, requested_substeps
 from ..data.csvdata import Dataset
 from ..diagram.dump import with_values
 from ..diagram.model import Diagram
@@ -57,8 +58,11 @@ from .settings import (
     CRAWL_ITERATIONS,
     CRAWL_NOISE,
     FAR_ABOVE_NOISE,
+    FLOOR_SHARE,
+    HELD_CHATTER,
     IDENTIFY_DAMPING,
     MIN_REL_COST_CHANGE,
+    NEGLIGIBLE_GAIN,
     IdentifySettings,
 )
 from .shootauto import SUSPECT_PEAK, chaotic_at, choose_shooting, second_look
@@ -129,7 +133,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     lower, upper = problem.bounds()
     warnings += on_bound_warnings(problem.names, x0, lower, upper)
 
-    auto = None
+    auto, requested_shooting = None, settings.shooting
     if settings.shooting == "auto":  # the rule reads the records (identify.shootauto); the window has no shooting
         auto = choose_shooting(problem, x0) if problem.names and not settings.online else None
         settings = replace(settings, shooting=auto.length or "off" if auto is not None else "off")
@@ -203,6 +207,21 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
             oracle = None
         disc["floor"] = measure_floor(chart, problem.compiled, x, [(d, 0) for d in records], settings.alignment,
                                       oracle)
+        finer = _finer_substeps(diagram, problem, disc["floor"], fit.train.rms, out, status)
+        if finer is not None:  # auto's N read at the init is too coarse for what the data made of the chart
+            given = full if settings.split is not None else (records if more else train)
+            again = identify(replace(with_values(diagram, params, curves), substeps=finer), given, validation,
+                             replace(settings, shooting=requested_shooting), progress, executor, stop)
+            note = (f"substeps auto: N = {problem.network.substeps}, read at the chart's init, is too coarse for the "
+                    f"fitted curves (the network's step error above {FLOOR_SHARE:g}x the residual, or a mode held at "
+                    f"the step's stability limit); refitted from that fit at N = {finer}")
+            inits = {p.name: float(p.init) for p in diagram.parameters}
+            again_params = {n: replace(e, init=inits.get(n, e.init)) for n, e in again.parameters.items()}
+            first = {"substeps": problem.network.substeps, "iterations": out.lm.iterations, "cost": float(out.lm.cost),
+                     **({"then": again.extra["substeps_refit"]} if "substeps_refit" in again.extra else {})}
+            return replace(again, parameters=again_params, warnings=(note,) + again.warnings,
+                           source=ChartSource(diagram.name, diagram.file, diagram.source_sha256),
+                           extra={**again.extra, "substeps_refit": first})
         warnings.extend(floor_warnings(disc["floor"], fit.train.rms, diagram, problem.network))
         if settings.floor_bias and out.lm is not None and not interrupted and status != "no_excitation":
             free = {n: e for n, e in parameters.items() if not e.fixed and n not in means}
@@ -211,7 +230,8 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
             warnings.extend(bias_warnings)
     return Identification(
         status=status, message=message, interrupted=bool(interrupted), converged=converged, parameters=parameters,
-        curves={b: Curve(tuple(c["a"]), tuple(c["v"]), tuple(c["b"]) if "b" in c else None, c["fixed"])
+        curves={b: Curve(tuple(c["a"]), tuple(c["v"]), tuple(c["b"]) if "b" in c else None, c["fixed"],
+                         c.get("c"))
                 for b, c in curves.items()},
         fit=fit, warnings=tuple(warnings), settings=settings, chart=chart,
         source=ChartSource(diagram.name, diagram.file, diagram.source_sha256),
@@ -229,6 +249,23 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
                **({"initial_states": {"validation": state.to_dict()}} if state is not None else {}),
                **({"parameters_per_record": per_record} if per_record else {})},
     )
+
+
+def _finer_substeps(diagram: Diagram, problem: Problem, floor: dict, rms: dict, out: _Outcome,
+                    status: str) -> int | None:
+    """N x 4 (at most AUTO_CAP) when `substeps` is auto and, after a finished fit, the network's step error (the
+    floor) exceeds FLOOR_SHARE of the training residual on an output, or the fitted network's alternating mode at
+    rest keeps more than HELD_CHATTER of its amplitude a step (a curve held by the scheme); else None."""
+    if requested_substeps(diagram) not in (None, "auto") or out.lm is None or out.interrupted:
+        return None
+    if status in ("no_excitation", "diverged_at_start") or not floor.get("rms"):
+        return None
+    n = problem.network.substeps
+    if n >= AUTO_CAP:
+        return None
+    over = any(r is not None and rms.get(k) and r > FLOOR_SHARE * rms[k] for k, r in floor["rms"].items())
+    held = problem.stability(out.x)[0] > HELD_CHATTER
+    return min(AUTO_CAP, 4 * n) if over or held else None
 
 
 def _far_above_noise(problem: Problem, cost: float | None) -> list[str]:
@@ -330,10 +367,14 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
     With column scaling each physical parameter is damped by its own curvature and the learned curves' weights
     share one scale (see fit.lm.LMOptions.scale_groups).
     """
-    params = {p.name for p in problem.network.parameters}
-    groups = tuple(i if n in params else -1 for i, n in enumerate(problem.names))
-    names = set(problem.names)
-    learned = any(w.name in names for w in problem.network.free_weights)
+    # free-slope weights (the paper's neurons, a plain GDNN's) share one damping scale and need the transform's
+    # geodesic steps; a tanh basis's output weights and linear term enter linearly and are damped like parameters
+    linear_roles = ("v", "c")
+    slopes = {w.name for w in problem.network.free_weights if w.role not in linear_roles}
+    basis = {w.block for w in problem.network.free_weights if w.role == "a" and w.fixed}
+    slopes |= {w.name for w in problem.network.free_weights if w.role == "v" and w.block not in basis}
+    groups = tuple(-1 if n in slopes else i for i, n in enumerate(problem.names))
+    learned = any(n in slopes for n in problem.names)
     bounds = settings.lm_bounds
     if bounds == "auto":  # the transform where learned curves are fitted (settings.LM_BOUNDS)
         bounds = "transform" if learned else "box"
@@ -345,7 +386,8 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
     return LMOptions(max_iter=settings.max_iter, min_rel_cost_change=MIN_REL_COST_CHANGE, tau=settings.lm_tau,
                      stall_decrease=settings.converged_decrease / max(1, problem.n_residuals),
                      crawl_decrease=CRAWL_DECREASE / max(1, problem.n_residuals) if floor > 0 else 0.0,
-                     crawl_iterations=CRAWL_ITERATIONS, crawl_cost=floor,
+                     crawl_iterations=CRAWL_ITERATIONS, crawl_cost=floor, negligible_gain=NEGLIGIBLE_GAIN,
+                     residual_stride=len(problem.compiled.output_names),
                      scale=settings.lm_scale, scale_groups=groups if settings.lm_scale == "jac" else (),
                      geodesic=settings.lm_geodesic if bounds == "transform" else 0.0, damping=damping,
                      trial_jacobian=damping in ("nielsen", "trust"), bounds=bounds)
@@ -521,8 +563,12 @@ def _curves(problem: Problem, x: np.ndarray) -> dict[str, dict]:
     for fw in problem.network.free_weights:
         if fw.block is None or fw.role is None:
             continue
-        entry = out.setdefault(fw.block, {"a": [], "v": [], "b": [], "fixed": fw.fixed})
-        entry[fw.role].append(float(free[fw.name]))
+        entry = out.setdefault(fw.block, {"a": [], "v": [], "b": [], "fixed": True})
+        entry["fixed"] = entry["fixed"] and fw.fixed  # a basis's fixed slopes leave the curve learned
+        if fw.role == "c":
+            entry["c"] = float(free[fw.name])
+        else:
+            entry[fw.role].append(float(free[fw.name]))
     for entry in out.values():
         if not entry["b"]:
             del entry["b"]

@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = ["IdentifySettings", "SHOOTING", "SHOOTING_STARTS", "IDENTIFY_TAU", "REFIT_TAU", "ONLINE_TAU", "MIN_REL_COST_CHANGE",
-           "CONVERGED_DECREASE", "IDENTIFY_SCALE", "IDENTIFY_DAMPING", "LM_DAMPING", "LM_BOUNDS", "FLOOR_BIAS", "CURVE_START"]
+           "CONVERGED_DECREASE", "NEGLIGIBLE_GAIN", "FLOOR_SHARE", "HELD_CHATTER", "IDENTIFY_SCALE", "IDENTIFY_DAMPING", "LM_DAMPING", "LM_BOUNDS", "FLOOR_BIAS", "CURVE_START"]
 
 #: First LM damping mu = tau * max diag(JᵀJ) (Madsen-Nielsen-Tingleff) for a fit from a chart's rough `init`:
 #: with trainlm's fixed 1e-3 a single start from the paper's Table 1 reached J1 in 2 of 5 seeds, with this 5/5.
@@ -73,6 +73,23 @@ CONVERGED_DECREASE = 0.01
 CRAWL_DECREASE = 1.0
 CRAWL_ITERATIONS = 100
 CRAWL_NOISE = 1.2
+#: A fit has converged, wherever it is (at the noise floor or far above it, a chart that lacks an effect), when the
+#: undamped Gauss-Newton step would lower -2 log-likelihood by less than this many units at the residual's own
+#: variance and the last step gained less too (fit.lm.LMOptions.negligible_gain): the remaining move is then
+#: within sqrt(0.1) = 0.32 standard errors in every direction, which moves a 95 % interval's coverage by about
+#: one point.
+NEGLIGIBLE_GAIN = 0.1
+#: With `substeps: auto` (N read from the modes at the chart's init, compiler.substeps) a fit whose network's own
+#: step error against the continuous chart (the floor) exceeds this share of the residual RMS on an output is
+#: refitted from its values at 4x N (up to the cap): the learned friction the data gave the chart is stiffer than
+#: its flat init, and beyond half the residual (a quarter of its variance) the residual is the scheme's, not the
+#: machine's.
+FLOOR_SHARE = 0.5
+#: ... and so is a fit whose network, linearized at rest, has an alternating mode (a negative eigenvalue, 1 - s h/J
+#: for a friction slope s) that keeps more than this share of its amplitude a step: the continuous chart's mode
+#: decays without alternating, so that mode is the explicit step's, and the curve's slope is held near the step's
+#: limit 2J/h (the guard's chatter radius 1) by the scheme rather than by the data.
+HELD_CHATTER = 0.5
 #: An offline fit whose training residual RMS exceeds this many times the noise read off the records' second
 #: differences says so (a missing effect or a local minimum; issue 14): the benches' complete charts end within
 #: 4x the noise even at the paper's one step per sample, the cut diagnose's second look uses too (5x). The

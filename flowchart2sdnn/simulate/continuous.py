@@ -7,7 +7,7 @@ Semantics (the chart in continuous time, sample time ``T = diagram.sample_time``
 
 * every block's output signal carries its name; a block's operand is ``x = sum_i sign_i * signal_i``;
 * ``sum``: ``x``;  ``gain``: ``k x``;  ``constant``: ``k``;  ``integrator``: state ``s`` with ``ds/dt = x``;
-  ``nonlinear``: ``sum_i v_i tanh(a_i x + b_i)``;  ``function``: ``f(k x)`` with ``f`` one of ``tanh``,
+  ``nonlinear``: ``sum_i v_i tanh(a_i x + b_i) + c x``;  ``function``: ``f(k x)`` with ``f`` one of ``tanh``,
   ``sin``, ``cos``, ``sign_smooth(z) = tanh(z / eps)`` (``eps`` defaults to 1e-3), ``sat(z) = clip(z, -1, 1)``,
   ``sqrt`` (``sqrt(z)`` for ``z >= eps``, ``-sqrt(-z)`` for ``z <= -eps``, and between them the odd cubic
   ``sqrt(eps) (5 u - u^3) / 4`` with ``u = z / eps``, which meets both in value and slope), ``abs``, ``exp``,
@@ -121,7 +121,7 @@ def _evaluate(sig, order, ti, tf, src, sgn, nl, buf, zero0, mode, k):
         elif kind == CONSTANT:
             y = tf[j, 0]
         elif kind == NONLINEAR:
-            y = 0.0
+            y = tf[j, 0] * x  # the linear term c x (0 without one)
             for i in range(ti[j, 4], ti[j, 5]):
                 y += nl[i, 2] * math.tanh(nl[i, 0] * x + nl[i, 1])
         else:
@@ -321,6 +321,7 @@ def _compile(diagram: Diagram, env: Mapping[str, float], init: Mapping[str, floa
             bias = w.b if w.b is not None else (0.0,) * len(w.a)
             if not len(w.a) == len(w.v) == len(bias):
                 raise ValueError(f"block '{b.name}': weights a, v, b differ in length")
+            tf[j, 0] = 0.0 if w.c is None else float(w.c)
             ti[j, 4] = len(nl)
             nl.extend(zip(map(float, w.a), map(float, bias), map(float, w.v), strict=True))
             ti[j, 5] = len(nl)
