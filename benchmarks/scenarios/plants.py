@@ -110,6 +110,8 @@ def draw_plant(rng: np.random.Generator, family: str) -> Plant:
         p[f"ws{i}"] = speed * log_uniform(rng, 0.02, 0.2)
         p[f"b{i}"] = accel_torque / speed * log_uniform(rng, 0.01, 0.1)
     torque = accel_torque + sum(p[f"Fs{i}"] for i in range(1, n + 1))
+    if family == "spring":  # the spring's torque at the motion a speed of `speed` has at the natural frequency
+        torque += math.sqrt(p["k0"] * p["J1"]) * speed
     viscous = bool(rng.integers(0, 2))
     return Plant(family, n, p, torque, speed, t_acc, viscous_in_chart=viscous)
 
