@@ -172,7 +172,21 @@ def draw(seed: int, category: str | None = None, family: str | None = None, seco
     plant_chart = yaml.safe_load(spec.plant_yaml)
     train, f_train = run_record(plant_chart, spec.plant, spec.excitation, spec.sensor, spec.seconds, r_train)
     val, f_val = run_record(plant_chart, spec.plant, spec.excitation, spec.sensor, spec.validation_seconds, r_val)
+    f_train["exposure"] = _exposure(spec.missing, train, f_train["ranges"])
     return replace(spec, train=train, validation=val, facts={"train": f_train, "validation": f_val})
+
+
+def _exposure(missing: tuple[Missing, ...], record: dict, ranges: dict) -> dict[str, float]:
+    """For a clip (saturation, sensor limit): the share of training samples at the limit. A clip the record never
+    reaches is in the truth but not in the data (a PI loop may never command that much)."""
+    out = {}
+    for m in missing:
+        if m.kind == "saturation":
+            out[f"{m.kind}@{m.place}"] = float(np.mean(np.abs(record[m.place]) > m.size["L"]))
+        elif m.kind == "sensor_limit":
+            limit = m.size["fraction"] * ranges[m.place][1]
+            out[f"{m.kind}@{m.place}"] = float(np.mean(np.abs(record[m.place]) >= limit * (1 - 1e-12)))
+    return out
 
 
 def write_scenario(scenario: Scenario, directory: str | Path) -> dict[str, Path]:

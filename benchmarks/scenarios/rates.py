@@ -87,6 +87,12 @@ def summarise(rows: Iterable[Mapping]) -> list[str]:
             values = [bool(r[key]) for r in g if r.get(key) is not None]
             if values:
                 parts.append(_rate(label, values))
+        unrated = sum(1 for r in g if r.get("missing") and r.get("right_first") is None)
+        if unrated:
+            parts.append(f"{unrated} not rated (no library effect states what is missing)")
+        unexposed = sum(1 for r in g if r.get("unexposed"))
+        if unexposed:
+            parts.append(f"{unexposed} with a clip the training record never reaches (rated all the same)")
         parts.append(_rate("refused", [bool(r["refused"]) for r in g]))
         seconds = [r["seconds"] for r in g if r.get("seconds") is not None]
         if seconds:

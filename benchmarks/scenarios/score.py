@@ -44,7 +44,8 @@ def run_one(seed: int, category: str | None, family: str | None, seconds: float 
     row = {"seed": seed, "category": scenario.category, "family": scenario.family,
            "sensor": scenario.sensor.kind, "seconds_record": round(scenario.seconds, 1),
            "missing": [f"{m.kind}@{m.place}" for m in scenario.missing], "dir": str(paths["chart"].parent),
-           "draw_seconds": time.perf_counter() - t0}
+           "draw_seconds": time.perf_counter() - t0,
+           "unexposed": [k for k, v in scenario.facts["train"]["exposure"].items() if v == 0.0]}
     if dry:
         return row
     from flowchart2sdnn.api import load_chart, read_csv
@@ -72,6 +73,8 @@ def run_one(seed: int, category: str | None, family: str | None, seconds: float 
 def _line(r: dict) -> str:
     head = (f"seed {r['seed']:>10} {r['category']:<26} {r['family']:<10} {r['sensor']:<7} "
             f"{r['seconds_record']:>5.1f} s  missing: {', '.join(r['missing']) or 'nothing'}")
+    if r.get("unexposed"):
+        head += f" (never reached in the training record: {', '.join(r['unexposed'])})"
     if "accepted" not in r:
         return head + f"  -> {r['dir']}"
     marks = [k for k in ("right_first", "both", "clean") if r.get(k) is not None]
