@@ -280,6 +280,13 @@ def test_judge_names_right_first_both_clean_and_refusals():
     refused = judge(complete, _report(stop="first_fit_not_converged"))
     assert refused["refused"] and refused["clean"] is False
     assert judge(one, None, "SdnnError: bad")["refused"]
+    crashed = judge(one, None, "LinAlgError: singular", crashed=True)
+    assert crashed["crashed"] and not crashed["refused"] and crashed["right_first"] is False
+    ranked = _report()
+    ranked["candidates"] = [{"round": 1, "rank": 1, "effect": "friction", "at": "w2", "score": 9.0},
+                            {"round": 1, "rank": 3, "effect": "cogging", "at": "w2", "score": 2.0, "refitted": True}]
+    v = judge(one, ranked)
+    assert v["true_rank"] == 3 and v["true_refused"] and v["right_first"] is False
     inexpressible = judge(_truth(("nonlinear_spring", "phi1", [])), _report())
     assert inexpressible["right_first"] is None
     lines = summarise([{"category": "one-missing-aprbs", "seconds": 3.0, **judge(one, _report(("cogging", "w2")))}])

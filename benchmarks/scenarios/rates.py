@@ -7,9 +7,14 @@ Per run (:func:`judge`), from REPORT.json's ``accepted`` list (``effect``, ``at`
 * ``both`` (two missing): each missing effect is named by some accepted (effect, at), each by a different one;
 * ``clean`` (complete chart): nothing accepted, apart from the scenario's tolerated completions (a damping
   beside a learned curve the user wrote without a viscous gain);
-* ``refused``: diagnose raised, or did not trace because its first fit did not converge.
+* ``refused``: diagnose declined the scenario: raised an SdnnError or ValueError (its messages to a user), or
+  did not trace because its first fit did not converge; ``crashed``: any other exception (a bug to look at);
+* ``true_refused`` (missing effects): a candidate that names a missing effect was refitted but not accepted
+  (diagnose's own refusal of the truth: the round's reason says why); ``true_rank``: the best rank of such a
+  candidate in round 1's score test (1 = ranked first; None: not scored).
 
-A refused run counts as a miss in every rate (the rates are over all draws) and is also counted on its own.
+A refused or crashed run counts as a miss in every rate (the rates are over all draws) and is also counted on
+its own.
 """
 
 from __future__ import annotations
@@ -37,15 +42,23 @@ def wilson(k: int, n: int, z: float = Z95) -> tuple[float, float]:
     return max(0.0, (centre - half) / denominator), min(1.0, (centre + half) / denominator)
 
 
-def judge(truth: Mapping, report: Mapping | None, error: str | None = None) -> dict:
-    """The verdict of one run: see the module docstring. `truth` is Scenario.truth (or truth.json)."""
+def judge(truth: Mapping, report: Mapping | None, error: str | None = None, crashed: bool = False) -> dict:
+    """The verdict of one run: see the module docstring. `truth` is Scenario.truth (or truth.json); `error` the
+    exception's text when diagnose raised, `crashed` when that was not one of its user-facing errors."""
     missing = truth["missing"]
     accepted = [(a["effect"], a["at"]) for a in (report or {}).get("accepted", [])]
-    refused = error is not None or report is None or report.get("stop") == "first_fit_not_converged"
+    refused = not crashed and (error is not None or report is None
+                               or report.get("stop") == "first_fit_not_converged")
     answers = [{tuple(a) for a in m["accept"]} for m in missing]
-    verdict = {"accepted": [f"{e}@{p}" for e, p in accepted], "refused": refused,
+    names_truth = [c for c in (report or {}).get("candidates", []) if any((c["effect"], c["at"]) in a for a in answers)]
+    first_round = [c["rank"] for c in names_truth if c.get("round") == 1 and c.get("score") is not None]
+    verdict = {"accepted": [f"{e}@{p}" for e, p in accepted], "refused": refused, "crashed": crashed,
                "missing": [f"{m['kind']}@{m['place']}" for m in missing], "error": error,
-               "right_first": None, "both": None, "clean": None}
+               "right_first": None, "both": None, "clean": None,
+               "true_refused": bool(missing) and any(c.get("refitted") and (c["effect"], c["at"]) not in accepted
+                                                     for c in names_truth),
+               "true_rank": min(first_round) if first_round else None}
+    refused = refused or crashed
     if not missing:
         tolerated = {tuple(t) for t in truth.get("tolerated", ())}
         verdict["clean"] = not refused and all(a in tolerated for a in accepted)
@@ -94,6 +107,11 @@ def summarise(rows: Iterable[Mapping]) -> list[str]:
         if unexposed:
             parts.append(f"{unexposed} with a clip the training record never reaches (rated all the same)")
         parts.append(_rate("refused", [bool(r["refused"]) for r in g]))
+        if any(r.get("crashed") for r in g):
+            parts.append(_rate("crashed", [bool(r.get("crashed")) for r in g]))
+        with_truth = [bool(r.get("true_refused")) for r in g if r.get("missing")]
+        if with_truth:
+            parts.append(_rate("the true effect refitted and refused", with_truth))
         seconds = [r["seconds"] for r in g if r.get("seconds") is not None]
         if seconds:
             parts.append(f"median time {statistics.median(seconds):.0f} s")

@@ -52,17 +52,19 @@ def run_one(seed: int, category: str | None, family: str | None, seconds: float 
     from flowchart2sdnn.diagnose import DiagnoseSettings, diagnose
     from flowchart2sdnn.errors import SdnnError
 
-    report, error = None, None
+    report, error, crashed = None, None, False
     t1 = time.perf_counter()
     try:
         chart = load_chart(paths["chart"])
         train = read_csv(paths["train"], chart=chart)
         val = read_csv(paths["validation"], chart=chart)
         report = diagnose(chart, train, [val], DiagnoseSettings(rounds=rounds)).report
-    except (SdnnError, ValueError) as exc:  # diagnose refusing the scenario is a result, not a crash
+    except (SdnnError, ValueError) as exc:  # diagnose declining the scenario is a result, not a crash
         error = f"{type(exc).__name__}: {exc}"
+    except Exception as exc:  # noqa: BLE001  (a crash is a result too: counted, and the run goes on)
+        error, crashed = f"{type(exc).__name__}: {exc}", True
     row["seconds"] = time.perf_counter() - t1
-    verdict = judge(scenario.truth, report, error)
+    verdict = judge(scenario.truth, report, error, crashed)
     if report is not None:
         verdict["stop"] = report.get("stop")
         verdict["validation_rms"] = [report["before"].get("validation_rms"), report["after"].get("validation_rms")]
@@ -80,7 +82,10 @@ def _line(r: dict) -> str:
     marks = [k for k in ("right_first", "both", "clean") if r.get(k) is not None]
     verdict = " ".join(f"{k}={'yes' if r[k] else 'NO'}" for k in marks)
     return (head + f"  accepted: {', '.join(r['accepted']) or 'nothing'}  {verdict}"
-            + ("  REFUSED" if r["refused"] else "") + f"  ({r['seconds']:.0f} s)")
+            + ("  REFUSED" if r["refused"] else "") + ("  CRASHED" if r.get("crashed") else "")
+            + (f"  [{r['error']}]" if r.get("error") else "")
+            + (f"  true effect ranked {r['true_rank']}" if r.get("true_rank") else "")
+            + ("  (refitted and refused)" if r.get("true_refused") else "") + f"  ({r['seconds']:.0f} s)")
 
 
 def main(argv: list[str] | None = None) -> int:
