@@ -18,13 +18,13 @@ from __future__ import annotations
 
 import copy
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 import yaml
 
 __all__ = ["FAMILIES", "Plant", "draw_plant", "base_chart", "chart_text", "chart_number", "SUBSTEPS", "log_uniform", "add_term",
-           "insert_on_input", "reroute_in"]
+           "insert_on_input", "reroute_in", "copy_chart"]
 
 FAMILIES = ("one-mass", "two-mass", "three-mass", "spring")
 SUBSTEPS = 20  # the oracle's RK4 steps per sample
@@ -56,7 +56,6 @@ class Plant:
     t_acc: float
     sample_time: float = 0.001
     viscous_in_chart: bool = True  # the user's chart has a viscous gain beside each learned friction curve
-    notes: dict = field(default_factory=dict)
 
     @property
     def speeds(self) -> tuple[str, ...]:
