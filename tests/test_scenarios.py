@@ -6,10 +6,15 @@ from __future__ import annotations
 
 import math
 import re
+import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
 import yaml
+
+# the generator lives in the repository's benchmarks/ (not installed): importable however pytest is started
+sys.path.insert(0, str(Path(__file__).resolve().parents[1]))
 
 from benchmarks.scenarios.draw import CATEGORIES, draw, draw_spec, parse_category, write_scenario
 from benchmarks.scenarios.excite import EXCITATIONS, excitation_inputs
