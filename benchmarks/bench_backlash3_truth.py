@@ -9,7 +9,7 @@ the minimum the fit reaches, the viscous b's errors with their noise-only and bi
 (identify.run.with_floor_bias, what diagnose's `final` reports), the corrected values (identified - beta), the
 b1-b2 correlation. When the end point diagnose reports has the same E, that is the record's and the network's
 minimum, not an unconverged refit. `--noise 0` and `--substeps N` separate the noise's part from the network
-step's (docs/diagnose.md, "Three-mass seed 2").
+step's (benchmarks/notes/diagnose.md, "Three-mass seed 2").
 
 Run from the repository root: ``OPENBLAS_NUM_THREADS=1 python benchmarks/bench_backlash3_truth.py [--seeds 2]
 [--noise 0.01] [--substeps auto]`` (10-30 s a seed).

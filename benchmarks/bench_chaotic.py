@@ -15,7 +15,7 @@ Run from the repository root: `python benchmarks/bench_chaotic.py [SETTING ...] 
 default settings: off auto 200; --seed S: training seed S, validation S + 1; each run takes 0.1-3.5 min on this
 machine, two cores shared).
 
-Measured with the default (auto; README, "Long chaotic records", has the table): cogging 0.0099/0.0102, linear
+Measured with the default (auto; benchmarks/notes/identification.md, "Long chaotic records", has the table): cogging 0.0099/0.0102, linear
 parameters within 0.02 % (seed 1, 12 s; seeds 3, 5, 7: at most 1.12x the noise, 0.04 %, 6-39 s); backlash, seeds 1, 3, ..., 15:
 validation within 1.2x on both outputs for seven (0.97-1.18x), seed 9 at 1.34x/1.11x (the truth on that record
 1.04x), linear parameters within 1.2 % on all eight, 33-196 s (auto chose off on seeds 5-15 and its second look

@@ -8,7 +8,7 @@ APRBS + relay excitation), with Stribeck friction on every machine:
 
 Both charts are complete in structure: the same shafts, every speed measured, each machine's friction a learned
 curve (3 tanh neurons) plus a viscous term, `substeps: auto`, `delays: torques`; but 3 tanh neurons cannot
-carry a sign smoothed over 1 mrad/s plus a Stribeck bump (docs/diagnose.md). ``--charts physical`` puts charts
+carry a sign smoothed over 1 mrad/s plus a Stribeck bump (benchmarks/notes/diagnose.md). ``--charts physical`` puts charts
 that lack nothing, not even capacity, on plants whose sign is smoothed over 0.05 rad/s:
 
 * ``two``: diagrams/two_mass_stribeck_plant.yaml, charted by diagrams/two_mass_physical.yaml;
@@ -35,7 +35,7 @@ diagnose's old default of 100 iterations none would have converged, hence the de
 chart after the curves' start on sub-steps was fixed (3dc695d): 0 accepted in 9 runs, 7 traced (first fits
 converged in 53-699 iterations), 2 first fits at the 1000 limit. The last three two-mass cells (5ac290f): 0.003
 seeds 2-3 traced (first fits 148, 374 iterations), nothing accepted; 0.01 seed 1 not traced: 0 of 18 learned runs.
-Tables: docs/diagnose.md. The printed first fit gives its LM iterations.
+Tables: benchmarks/notes/diagnose.md. The printed first fit gives its LM iterations.
 """
 
 from __future__ import annotations

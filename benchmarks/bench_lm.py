@@ -24,7 +24,7 @@ from __future__ import annotations
 
 import os
 
-os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # see README: BLAS threads thrash on a shared machine
+os.environ.setdefault("OPENBLAS_NUM_THREADS", "1")  # see benchmarks/README.md: BLAS threads thrash on a shared machine
 
 import argparse  # noqa: E402
 import sys  # noqa: E402

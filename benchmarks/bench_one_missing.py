@@ -1,4 +1,4 @@
-"""One missing effect at a time at a user's noise (issue 16's acceptance, docs/diagnose.md).
+"""One missing effect at a time at a user's noise (issue 16's acceptance, benchmarks/notes/diagnose.md).
 
 Each plant is one of the diagnose bench's (tests/data/diagnose/, continuous, `sdnn excite`: RK4, 20 steps per
 sample) with exactly one effect its chart lacks: the two-mass drive's load friction, input dead time, input clip,

@@ -20,7 +20,7 @@ Run: ``python benchmarks/bench_rough_init.py --chart coulomb --n 8 --seconds 30`
 shared 2-core machine). Measured with the default (μD² damping, the curves' stick-slip start, geodesic
 acceleration with bend limit 0.75) and ``--variant plain-steps`` (the default before geodesic acceleration)
 interleaved in the same run, 26 Nov 2026, heavily loaded machine (seconds noisy; iterations include the curves'
-150 brief ones, the 1000 limit applies after them; more in docs/rough_init.md):
+150 brief ones, the 1000 limit applies after them; more in benchmarks/notes/rough_init.md):
 
 | chart, record, seed, draws | default: at the minimum, converged, median iterations | plain-steps, the same | scipy trf |
 |---|---|---|---|
@@ -32,7 +32,7 @@ interleaved in the same run, 26 Nov 2026, heavily loaded machine (seconds noisy;
 
 The rows above were measured before Nielsen's damping and the first trial with its Jacobian (fit.lm's
 ``damping``, ``trial_jacobian``; ``--variant before-speed`` undoes both), identify's default since on charts
-without learned curves. One run per chart, 26 Nov 2026, load average 2.7-3.8 (docs/rough_init.md, "Speed"):
+without learned curves. One run per chart, 26 Nov 2026, load average 2.7-3.8 (benchmarks/notes/rough_init.md, "Speed"):
 
 | chart, record, seed, draws | Nielsen + first-trial Jacobian: at the minimum, converged, median iterations | before-speed, the same | scipy trf |
 |---|---|---|---|
@@ -46,7 +46,7 @@ not the default: a quantity whose minimum is its bound crawls there) gave 1.37×
 
 Since 27 Nov identify keeps the bounds of charts without learned curves in the box with a trust radius
 (fit.boxstep, fit.lm damping "trust"; ``--variant transform`` is the default before, ``box-nielsen`` the box with
-Nielsen's damping). One run, coulomb, 30 s, seed 1, N = 8, load from three other benches (docs/rough_init.md,
+Nielsen's damping). One run, coulomb, 30 s, seed 1, N = 8, load from three other benches (benchmarks/notes/rough_init.md,
 "Bounds without a transform"):
 
 | variant | at the minimum, converged, median iterations (range) | s per draw / trf's, median (range) |
@@ -70,7 +70,7 @@ Three-mass drive (``--chart three-physical``: three_mass_physical.yaml on three_
 --no-trf`` (one `identify()` call with every default: shooting auto, sub-steps auto, the curves' start), 10 s,
 seed 1 (the issue's ≥ 18/20). three-physical measured before geodesic acceleration (plain steps; not
 re-measured); three-learned with geodesic steps and the curves' step at 0.3 of the network's own chatter limit
-2J/h (N = 8 here; it was 2J/T, 8× softer, docs/rough_init.md), draws 0-4, 5-12, 13-19 in three runs, two at
+2J/h (N = 8 here; it was 2J/T, 8× softer, benchmarks/notes/rough_init.md), draws 0-4, 5-12, 13-19 in three runs, two at
 once on the shared 2-core machine (load average 3.5-4: seconds 2-3× a quiet machine's), 26 Nov 2026:
 
 | chart, record, draws | global minimum | costs | converged | iterations, median (range) | s per fit | worst physical error |

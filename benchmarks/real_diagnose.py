@@ -1,4 +1,4 @@
-"""`sdnn diagnose` on real measurements: EMPS and the UWaterloo flexible drive (the numbers of docs/diagnose.md).
+"""`sdnn diagnose` on real measurements: EMPS and the UWaterloo flexible drive (the numbers of benchmarks/notes/diagnose.md).
 
 EMPS (../shared/data/real/emps): the chart is a mass with viscous friction only
 (tests/data/diagnose/emps_mass.yaml). diagnose runs on train.csv with its last 30 % as validation; the chart

@@ -3,7 +3,7 @@
 The data (16 open-loop records, voltage in, both cart speeds out, 1 kHz) are read in place from
 ``../shared/data/real/uwaterloo_mte360_flexible_drive`` (see its SOURCE.md); nothing is copied.
 
-Protocol (docs/real_flexible_drive.md has the results):
+Protocol (benchmarks/notes/real_flexible_drive.md has the results):
 
 * train on ``square_2V`` alone with :func:`flowchart2sdnn.identify.run.identify` (exactly what
   ``sdnn identify square_2V.csv --diagram CHART --map u=u_V --map v1=v1_cart1_mm_s --map v2=v2_cart2_mm_s``
@@ -167,7 +167,7 @@ def fit_stacked(diagram: Diagram, records: Mapping[str, Dataset], train: Sequenc
     levenberg_marquardt, covariance) because `identify` takes one training record. The guard refuses any
     network unstable at rest, not only a chattering one: the library's guard (identify.problem.guard, via
     network.stability.chatter_radius) ignores real eigenvalues > 1, i.e. a learned friction curve with a
-    negative slope at zero, on which the RTRL Jacobian explodes (see docs/real_flexible_drive.md).
+    negative slope at zero, on which the RTRL Jacobian explodes (see benchmarks/notes/real_flexible_drive.md).
     """
     t0 = time.perf_counter()
     network = compile_diagram(diagram, seed=0).network

@@ -175,7 +175,7 @@ def test_three_mass_learned_chart_at_eight_sub_steps_reaches_the_noise_floor_fro
     # each of the 3 speeds, started at the true physical values. Oracle: the noise floor, 1/2 * rows * 3 * 0.01^2
     # (the noise excite adds; ~36 fitted quantities take about 0.002 off it). With the step started at 0.3 of the
     # limit of one step per sample (2 J / T, 1/8 of the network's) the fit stopped at the 1000-iteration limit at
-    # 1.06x the floor, b1 at its bound 0 (docs/rough_init.md)
+    # 1.06x the floor, b1 at its bound 0 (benchmarks/notes/rough_init.md)
     from flowchart2sdnn.diagram.validate import load_diagram
     from flowchart2sdnn.identify.run import identify
 

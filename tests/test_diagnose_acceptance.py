@@ -9,7 +9,7 @@ Why NOISE = 0.05 rad/s (about 1 % of the speeds' RMS, an encoder-differentiated 
 two-mass network integrates w2 half a sample early (explicit/implicit Euler on the chosen feedback edges),
 which leaves a systematic 0.013 rad/s RMS on w2 with the exact chart. With 0.01 rad/s of noise that
 discretisation error is most of the residual and the loop rightly "explains" part of it with a damping term;
-see docs/diagnose.md.
+see benchmarks/notes/diagnose.md.
 """
 
 from __future__ import annotations

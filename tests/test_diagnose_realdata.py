@@ -50,7 +50,7 @@ def test_emps_friction_is_found_on_the_velocity_and_the_test_error_falls():
     assert c["Fc"] == pytest.approx(20.39, rel=0.2) and c["offset"] < 0
     assert 150 < c["Fv"] < 260
     if acc["option"] != "coulomb":
-        # a learned curve fits the friction's shape, not the published split per direction (docs/diagnose.md, EMPS:
+        # a learned curve fits the friction's shape, not the published split per direction (benchmarks/notes/diagnose.md, EMPS:
         # Fv+ 118, Fv- 201 from it); the physical option's three parameters are that split
         return
     # the published asymmetric IDIM-LS model: Fv+ 166.7, Fv- 240.4, Fc+ 20.14, Fc- 20.63

@@ -98,7 +98,7 @@ def test_bad_speed_options_are_refused():
 
 
 def test_identify_takes_nielsen_steps_only_where_no_learned_curve_is_fitted():
-    """docs/rough_init.md "Speed": with Nielsen's schedule 3 of 12 seed-1 learned-chart fits ran into the limit."""
+    """benchmarks/notes/rough_init.md "Speed": with Nielsen's schedule 3 of 12 seed-1 learned-chart fits ran into the limit."""
     from pathlib import Path
 
     import flowchart2sdnn as sd

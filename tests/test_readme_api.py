@@ -1,4 +1,5 @@
-"""The README's "Python API" example runs as written, and what it prints is the identification's own answer."""
+"""The user guide's Python API example (docs/guide/api.md, linked from the README) runs as written, and what it
+prints is the identification's own answer."""
 
 from __future__ import annotations
 
@@ -14,8 +15,8 @@ ROOT = Path(__file__).resolve().parent.parent
 
 
 def _example() -> str:
-    text = (ROOT / "README.md").read_text(encoding="utf-8")
-    section = text[text.index("## Python API"):]
+    text = (ROOT / "docs" / "guide" / "api.md").read_text(encoding="utf-8")
+    section = text[text.index("# Python API"):]
     return re.search(r"```python\n(.*?)```", section, re.S).group(1)
 
 
@@ -24,10 +25,10 @@ def test_the_readme_python_api_example_runs():
     namespace: dict = {}
     out = io.StringIO()
     cwd = os.getcwd()
-    os.chdir(ROOT)  # the example's paths are relative to the repository root, as in the README
+    os.chdir(ROOT)  # the example's paths are relative to the repository root, as the page says
     try:
         with contextlib.redirect_stdout(out):
-            exec(compile(_example(), "README.md (Python API)", "exec"), namespace)
+            exec(compile(_example(), "docs/guide/api.md", "exec"), namespace)
     finally:
         os.chdir(cwd)
     result = namespace["result"]

@@ -1,9 +1,10 @@
-"""The README's five-minute tour runs as written: its commands are read from the README's code block, shortened
-by the substitutions below (each must apply, so a changed README fails here instead of drifting), and run one
-by one in a fresh directory that holds only the repository's diagrams/, examples/ and tests/data/.
+"""The README's five-minute tour runs as written, twice in a row: its commands are read from the README's code
+block, shortened by the substitutions below (each must apply, so a changed README fails here instead of
+drifting), and run one by one in a fresh directory that holds only the repository's diagrams/, examples/ and
+tests/data/.
 
-`sdnn` commands run in this process (click's runner: the numba kernels compile once), `python` commands as
-subprocesses; every command must exit 0 and write what it says it writes.
+`sdnn` commands run in this process (click's runner: the numba kernels compile once), other commands (`python`,
+`rm`, `mkdir`) as subprocesses; every command must exit 0 and write what it says it writes, into `tour/` only.
 """
 
 from __future__ import annotations
@@ -31,21 +32,21 @@ SHORTEN = [
     (r"--window 25000 --average 25000", "--window 1000 --average 1000", 1),
     (r"--starts (4|16)", "--starts 2", 2),
     (r"--horizon 100", "--horizon 20", 1),
-    (r"(python examples/make_fleet\.py logs)", r"\1 --drives 2 --days 2 --seconds 1", 1),
-    (r"^(sdnn (?:identify bench\S*|diagnose|batch) .*)$", r"\1 --max-iter 15", 5),
+    (r"(python examples/make_fleet\.py tour/logs)", r"\1 --drives 2 --days 2 --seconds 1", 1),
+    (r"^(sdnn (?:identify tour/bench\S*|diagnose|batch) .*)$", r"\1 --max-iter 15", 5),
     # 15 iterations stop short of convergence, which diagnose refuses to trace from: the shortened tour asks it to
     (r"^(sdnn diagnose .*)$", r"\1 --allow-unconverged", 1),
 ]
 
-#: what the tour writes (the files its commands name)
-WRITTEN = ["two_mass.net.json", "two_mass.dot", "bench.csv", "stage1.json", "stage1.chart.yaml", "stage2.json",
-           "stage2.html", "diagnose.html",
+#: what the tour writes (the files its commands name), all in tour/
+WRITTEN = ["two_mass.net.json", "two_mass.dot", "two_mass.svg", "bench.csv", "stage1.json", "stage1.chart.yaml",
+           "stage2.json", "stage2.html", "diagnose.html", "augmented.yaml",
            "net.csv", "ode.csv", "compare.png", "two_mass.npz", "bode.png", "bench100.csv", "report.json",
            "logs/drive01_day001.csv", "logs/drive02_day002.csv", "fleet.csv", "fleet_report/report.md"]
 
 
 def tour_commands() -> list[str]:
-    block = re.search(r"## A five-minute tour\n\n```bash\n(.*?)```", README, re.S)
+    block = re.search(r"## A five-minute tour\n\n.*?```bash\n(.*?)```", README, re.S)
     assert block, "the README has no tour block"
     text = block.group(1).replace("\\\n", " ")  # a command continued on the next line
     for pattern, replacement, times in SHORTEN:
@@ -55,10 +56,26 @@ def tour_commands() -> list[str]:
 
 
 def test_the_tour_block_has_every_step():
-    steps = re.findall(r"^# (\d)\. ", re.search(r"## A five-minute tour\n\n```bash\n(.*?)```", README,
+    steps = re.findall(r"^# (\d)\. ", re.search(r"## A five-minute tour\n\n.*?```bash\n(.*?)```", README,
                                                   re.S).group(1), re.M)
     assert steps == [str(k) for k in range(1, 9)]
-    assert any("make_fleet.py logs" in c for c in tour_commands())  # step 8 says how to make logs/
+    assert any("make_fleet.py tour/logs" in c for c in tour_commands())  # step 8 says how to make the logs
+
+
+def _run_tour(root: Path, env: dict) -> None:
+    for command in tour_commands():
+        argv = shlex.split(command, comments=True)
+        if argv[0] != "sdnn":
+            if argv[0] == "rm":  # `rm -rf tour && mkdir tour`: the shell's
+                done = subprocess.run(command, shell=True, cwd=root, capture_output=True, text=True, timeout=60)
+            else:
+                assert argv[0] == "python", command
+                done = subprocess.run([sys.executable, *argv[1:]], cwd=root, env=env, capture_output=True,
+                                      text=True, timeout=120)
+            assert done.returncode == 0, f"{command}\n{done.stderr}"
+            continue
+        res = CliRunner().invoke(main, argv[1:])
+        assert res.exit_code == 0, f"{command}\n{res.output}"
 
 
 def test_the_readme_tour_runs_as_written(tmp_path, monkeypatch):
@@ -69,26 +86,29 @@ def test_the_readme_tour_runs_as_written(tmp_path, monkeypatch):
     (tmp_path / "tests" / "data").symlink_to(ROOT / "tests" / "data")
     monkeypatch.chdir(tmp_path)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
-    for command in tour_commands():
-        argv = shlex.split(command, comments=True)
-        if argv[0] == "python":
-            done = subprocess.run([sys.executable, *argv[1:]], cwd=tmp_path, env=env, capture_output=True,
-                                  text=True, timeout=120)
-            assert done.returncode == 0, f"{command}\n{done.stderr}"
-            continue
-        assert argv[0] == "sdnn", command
-        res = CliRunner().invoke(main, argv[1:])
-        assert res.exit_code == 0, f"{command}\n{res.output}"
-    missing = [f for f in WRITTEN if not (tmp_path / f).is_file()]
-    assert missing == []
+    before = sorted(p.name for p in tmp_path.iterdir())
+    for run in (1, 2):  # the second run meets every file of the first: the tour must start afresh
+        _run_tour(tmp_path, env)
+        tour = tmp_path / "tour"
+        missing = [f for f in WRITTEN if not (tour / f).is_file()]
+        assert missing == [], f"run {run}"
+        assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before + ["tour"]), f"run {run}: outside tour/"
     # the HTML reports: self-contained, every figure there, small enough to attach
-    figures, text = read_page(tmp_path / "stage2.html")
+    figures, text = read_page(tour / "stage2.html")
     assert figures == ["compare", "resid w2 training", "resid w2 validation: bench.csv after the split", "Bode plot"]
     assert "two_mass: identification" in text and "N*m/rad" in text and "95 % interval" in text
-    figures, text = read_page(tmp_path / "diagnose.html")
+    figures, text = read_page(tour / "diagnose.html")
     accepted = re.search(r"accepted: ([^.]*?) stopped", text).group(1)
     assert {"compare", "whiteness", "Bode plot"} <= set(figures), figures
     assert sum(f.startswith("residual_") for f in figures) == accepted.count(" at "), (accepted, figures)
     assert "Candidates, ranked" in text and "Before and after" in text
     for page in ("stage2.html", "diagnose.html"):
-        assert (tmp_path / page).stat().st_size < 2_000_000
+        assert (tour / page).stat().st_size < 2_000_000
+
+
+def test_the_tour_folder_is_ignored_by_git():
+    ignored = (ROOT / ".gitignore").read_text(encoding="utf-8").split()
+    assert "/tour/" in ignored
+    block = re.search(r"## A five-minute tour\n\n.*?```bash\n(.*?)```", README, re.S).group(1)
+    written = re.findall(r"(?:-o|--dot|--svg|--html|--report|--control|--bode) (\S+)", block)
+    assert written and all(w.startswith("tour/") for w in written), written

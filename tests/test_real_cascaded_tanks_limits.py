@@ -1,5 +1,5 @@
 """Cascaded Tanks: what keeps the hand-written physical chart (diagrams/real/cascaded_tanks_physical.yaml) above
-the published 0.191 V (benchmarks/cascaded_tanks_limits.py measures it; docs/diagnose.md reports it).
+the published 0.191 V (benchmarks/cascaded_tanks_limits.py measures it; benchmarks/notes/diagnose.md reports it).
 
 Oracles: the records themselves (the rows where the test level leaves the estimation record's range, the
 initial state fitted on the whole test record as the best start any window could give) and multi-start from

@@ -202,7 +202,7 @@ def test_cli_identify_with_map(tmp_path):
 
 @pytest.mark.slow
 def test_full_protocol(tmp_path):
-    """Every chart, both training protocols: the table of docs/real_flexible_drive.md."""
+    """Every chart, both training protocols: the table of benchmarks/notes/real_flexible_drive.md."""
     ex = _example()
     lines: list[str] = []
     summary = ex.run(DATA, log=lines.append)
