@@ -10,6 +10,7 @@ from the compiler; the networks run with alignment "direct" (network input at st
 
 from __future__ import annotations
 
+import re
 from dataclasses import replace
 from pathlib import Path
 
@@ -32,6 +33,12 @@ def _compiled(text: str, name: str) -> tuple[CompiledNetwork, float]:
     diagram = replace(diagram, substeps=diagram.substeps or 1, delays=diagram.delays or "search")
     net = compile_diagram(diagram).network
     return CompiledNetwork(net), net.sample_time
+
+
+def _neurons(text: str) -> str:
+    """The chart with the paper's free-slope neurons for every learned curve (the recursions read a_i, v_i)."""
+    text = re.sub(r",\s*neurons:\s*\d+", "", text)
+    return text.replace("type: nonlinear,", "type: nonlinear, basis: neurons, neurons: 3,")
 
 
 def _random_theta(cn: CompiledNetwork, rng: np.random.Generator) -> np.ndarray:
@@ -58,7 +65,7 @@ def _excitation(rng: np.random.Generator, q: int, columns: int = 1) -> np.ndarra
 def test_two_mass_matches_the_hand_recursion(seed):
     rng = np.random.default_rng(seed)
     text = (DIAGRAMS / "two_mass.yaml").read_text().replace("fixed: true", "fixed: false")  # J1 random too
-    cn, T = _compiled(text, "two_mass.yaml")
+    cn, T = _compiled(_neurons(text), "two_mass.yaml")
     theta = _random_theta(cn, rng)
     p, w = cn.values(theta)
     assert set(w) == {f"MR{m}.{r}{i}" for m in (1, 2) for r in "av" for i in (1, 2, 3)}
@@ -93,7 +100,7 @@ def test_two_mass_delays_exactly_the_papers_feedback_edges():
 @pytest.mark.parametrize("seed", [0, 1, 2])
 def test_engine_matches_the_hand_recursion(seed):
     rng = np.random.default_rng(seed)
-    cn, T = _compiled((DIAGRAMS / "engine.yaml").read_text(), "engine.yaml")
+    cn, T = _compiled(_neurons((DIAGRAMS / "engine.yaml").read_text()), "engine.yaml")
     theta = _random_theta(cn, rng)
     p, w = cn.values(theta)
     q = 500
@@ -168,7 +175,7 @@ blocks:
   y:   {type: integrator, in: s, init: 1.5}
   f:   {type: function, f: sin, in: y, k: g}
   fb:  {type: gain, in: f, k: a}
-  z:   {type: nonlinear, in: y, neurons: 2, bias: true}
+  z:   {type: nonlinear, in: y, neurons: 2, bias: true, basis: neurons}
   c2:  {type: gain, in: y, k: -3}
 """
 
@@ -220,3 +227,45 @@ def test_a_step_reaches_every_output_in_the_same_sample(name):
     np.testing.assert_array_equal(z0[: k + 1], z1[: k + 1])
     assert np.all(np.abs(z1[k + 1] - z0[k + 1]) > 0)
     np.testing.assert_array_equal(z1[1:], y1[:-1])  # same network, input one row later
+
+
+BASIS_CHART = """\
+sdnn: 1
+name: basis
+sample_time: 0.01
+inputs:
+  u: {}
+outputs:
+  y: {}
+parameters:
+  J: {init: 2.0}
+blocks:
+  s:   {type: sum, in: [u, -f]}
+  y:   {type: integrator, in: s, k: 1}
+  acc: {type: gain, in: s, k: 1/J}
+  f:   {type: nonlinear, in: y, span: 4.0}
+"""
+
+
+def test_the_tanh_basis_is_fixed_slopes_over_the_span_plus_a_linear_term():
+    """The default basis: seven tanh functions whose slopes are log-spaced over three decades of the span (the
+    widest 1/span, the steepest 1000/span), only their output weights and the linear term c learned."""
+    text = BASIS_CHART.replace("  y:   {type: integrator, in: s, k: 1}\n", "").replace(
+        "  acc: {type: gain, in: s, k: 1/J}", "  acc: {type: gain, in: s, k: 1/J}\n  y:   {type: integrator, in: acc}")
+    rng = np.random.default_rng(3)
+    cn, T = _compiled(text, "basis.yaml")
+    assert set(cn.names) == {"J"} | {f"f.v{i}" for i in range(1, 8)} | {"f.c"}
+    theta = _random_theta(cn, rng)
+    p, w = cn.values(theta)
+    slopes = [10.0 ** (k / 2) / 4.0 for k in range(7)]
+    q = 200
+    u = _excitation(rng, q)
+    y_net = cn.simulate(theta, u)[:, 0]
+    y, f = 0.0, 0.0
+    expected = np.empty(q)
+    for t in range(q):
+        s = u[t, 0] - f  # the curve's torque comes back one sample late (the loop's delayed edge)
+        y = y + T / p["J"] * s
+        f = sum(w[f"f.v{i + 1}"] * np.tanh(slopes[i] * y) for i in range(7)) + w["f.c"] * y
+        expected[t] = y
+    np.testing.assert_allclose(y_net, expected, rtol=0, atol=TOL * max(1.0, np.abs(expected).max()))

@@ -50,7 +50,7 @@ blocks:
 """
 
 
-def chart(j: float = 0.5, curve: str = "{type: nonlinear, in: w, neurons: 3}") -> str:
+def chart(j: float = 0.5, curve: str = "{type: nonlinear, in: w, neurons: 3, basis: neurons}") -> str:
     return f"""
 sdnn: 1
 name: one_mass
@@ -115,8 +115,8 @@ def test_after_the_brief_fit_the_step_keeps_the_stick_fraction_at_the_fitted_ine
 
 
 @pytest.mark.parametrize("curve", [
-    "{type: nonlinear, in: w, neurons: 2, weights: {a: [1, 2], v: [0.1, 0.2]}}",  # stored weights: kept
-    "{type: nonlinear, in: w, neurons: 2, fixed: true, weights: {a: [1, 2], v: [0.1, 0.2]}}",
+    "{type: nonlinear, in: w, neurons: 2, basis: neurons, weights: {a: [1, 2], v: [0.1, 0.2]}}",  # stored weights: kept
+    "{type: nonlinear, in: w, neurons: 2, basis: neurons, fixed: true, weights: {a: [1, 2], v: [0.1, 0.2]}}",
 ])
 def test_curves_with_stored_or_fixed_weights_keep_the_chart_start(record, curve):
     p = problem_of(chart(0.5, curve), record)
@@ -129,7 +129,7 @@ def test_curves_with_stored_or_fixed_weights_keep_the_chart_start(record, curve)
 
 def test_a_curve_in_no_loop_keeps_the_chart_start(record):
     text = chart(0.5).replace("MB: {type: sum, in: [M, -F]}", "MB: {type: sum, in: [M, -F]}\n  G: {type: "
-                              "nonlinear, in: M, neurons: 2}").replace("outputs:\n  w: {unit: rad/s}",
+                              "nonlinear, in: M, neurons: 2, basis: neurons}").replace("outputs:\n  w: {unit: rad/s}",
                                                                         "outputs:\n  w: {unit: rad/s}")
     p = problem_of(text, record)
     curves = startable_curves(p)
@@ -169,13 +169,12 @@ def test_identify_reports_the_curves_start_and_random_keeps_the_chart_start(reco
     assert random.optimizer.cost_history[0] == pytest.approx(0.5 * float(e @ e), rel=1e-9)
 
 
-def test_three_mass_learned_chart_at_eight_sub_steps_reaches_the_noise_floor_from_the_truth():
-    # The three-mass drive with a learned curve plus a viscous term on each machine (diagrams/three_mass_learned
-    # .yaml, `substeps: auto` -> 8) on its Stribeck plant (sign smoothed over 1 mrad/s), 3 s, 0.01 rad/s noise on
-    # each of the 3 speeds, started at the true physical values. Oracle: the noise floor, 1/2 * rows * 3 * 0.01^2
-    # (the noise excite adds; ~36 fitted quantities take about 0.002 off it). With the step started at 0.3 of the
-    # limit of one step per sample (2 J / T, 1/8 of the network's) the fit stopped at the 1000-iteration limit at
-    # 1.06x the floor, b1 at its bound 0 (benchmarks/notes/rough_init.md)
+def test_three_mass_learned_chart_reaches_the_noise_floor_from_the_truth():
+    # The three-mass drive with a learned curve (the default tanh basis) plus a viscous term on each machine
+    # (diagrams/three_mass_learned.yaml) on its Stribeck plant (sign smoothed over 1 mrad/s), 3 s, 0.01 rad/s
+    # noise on each of the 3 speeds, started at the true physical values. Oracle: the noise floor,
+    # 1/2 * rows * 3 * 0.01^2 (the noise excite adds). The curves enter linearly: no stick-slip start is needed
+    # and the fit ends within tens of iterations.
     from flowchart2sdnn.diagram.validate import load_diagram
     from flowchart2sdnn.identify.run import identify
 
@@ -185,6 +184,6 @@ def test_three_mass_learned_chart_at_eight_sub_steps_reaches_the_noise_floor_fro
     data = dataset_from_frame(frame, time="time", inputs=["M1"], outputs=["w1", "w2", "w3"], name="three mass")
     out = identify(load_diagram(root / "three_mass_learned.yaml"), data, seed=1, floor_bias=False)
     floor = 0.5 * data.n_rows * 3 * 0.01**2
-    assert out.converged
-    assert out.result["curve_start"]["curves"] == ["NL1", "NL2", "NL3"]
+    assert out.converged and out.lm.iterations <= 60
+    assert "curve_start" not in out.result
     assert out.lm.cost < 1.03 * floor

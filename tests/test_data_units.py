@@ -116,7 +116,8 @@ def test_the_same_record_in_rpm_gives_the_same_J_as_in_rad_per_s(logs, tmp_path)
     assert by_expression == pytest.approx(reference, rel=1e-6)
     assert by_unit == pytest.approx(reference, rel=1e-6)
     unconverted = _identify([*common, "--map", "w1=speed_rpm"], tmp_path, "raw")
-    assert unconverted == pytest.approx(reference / RPM, rel=0.05)  # what the issue saw: silently 10x off
+    # without the conversion the fit is silently wrong: J far below the truth (the speeds read 9.55x too large)
+    assert unconverted < 0.5 * reference
 
 
 def test_the_python_api_reads_the_same(logs):

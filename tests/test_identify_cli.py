@@ -86,12 +86,14 @@ def test_result_document_has_the_public_keys(bench, engine_run):
     assert j1["unit"] == "kg*m^2" and j1["fixed"] is False
     assert j1["ci95"][0] < j1["value"] < j1["ci95"][1] and j1["stderr"] > 0
     w = r["nonlinear"]["MR1"]
-    assert len(w["a"]) == len(w["v"]) == 3 and all(math.isfinite(x) for x in w["a"] + w["v"])
+    # the default tanh basis: 7 fixed slopes, their output weights and the linear term c
+    assert len(w["a"]) == len(w["v"]) == 7 and all(math.isfinite(x) for x in w["a"] + w["v"] + [w["c"]])
     train = r["fit"]["train"]
     assert set(train) >= {"cost", "rms", "fit_percent"}
     assert set(train["rms"]) == set(train["fit_percent"]) == {"w1"}
     assert "validation" in r["fit"]
-    assert r["status"] in ("max_iter", "min_grad", "mu_max", "small_step", "small_cost_change", "cost_goal")
+    assert r["status"] in ("max_iter", "min_grad", "mu_max", "small_step", "small_cost_change", "cost_goal",
+                           "negligible_gain")
     assert r["interrupted"] is False
     # every setting, the seed, versions and the hashes of the inputs (hashlib on the files: independent)
     assert set(r["settings"]) == {f.name for f in dataclasses.fields(IdentifySettings)}

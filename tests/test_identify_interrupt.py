@@ -44,8 +44,9 @@ def test_sigint_writes_the_best_result_so_far_marked_interrupted(tmp_path):
     data = _record(tmp_path / "engine.csv", 12.0, seed=3)
     out = tmp_path / "r.json"
     env = {**os.environ, "PYTHONPATH": str(ROOT) + os.pathsep + os.environ.get("PYTHONPATH", "")}
+    # the paper's free-slope neurons: a fit long enough to interrupt (the default basis ends within seconds)
     proc = subprocess.Popen([sys.executable, "-m", "flowchart2sdnn", "identify", str(data), "--diagram",
-                             str(DIAGRAMS / "engine.yaml"), "-o", str(out), "--max-iter", "1000"],
+                             str(ROOT / "tests" / "data" / "engine_neurons.yaml"), "-o", str(out), "--max-iter", "1000"],
                             stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, cwd=tmp_path, env=env)
     lines: queue.Queue[str] = queue.Queue()
     reader = threading.Thread(target=lambda: [lines.put(line) for line in proc.stderr], daemon=True)

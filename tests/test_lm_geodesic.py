@@ -98,7 +98,8 @@ def test_identify_cli_takes_plain_steps(tmp_path):
     from flowchart2sdnn.cli import main
 
     root = Path(__file__).resolve().parent.parent
-    chart, csv = root / "diagrams" / "engine.yaml", root / "examples" / "data" / "engine_idle.csv"
+    # the paper's free-slope neurons: the chart whose fit takes the transform's geodesic steps
+    chart, csv = root / "tests" / "data" / "engine_neurons.yaml", root / "examples" / "data" / "engine_idle.csv"
     docs = {}
     for steps in ("plain", "geodesic"):
         out = tmp_path / f"{steps}.json"

@@ -109,9 +109,14 @@ def test_identify_takes_nielsen_steps_only_where_no_learned_curve_is_fitted():
 
     root = Path(__file__).resolve().parent.parent
     record = sd.read_csv(root / "examples" / "data" / "engine_idle.csv")
-    learned = build_problem(load_diagram(root / "diagrams" / "engine.yaml"), record)
+    # the paper's free-slope neurons: trainlm's schedule and the transform's geodesic steps
+    learned = build_problem(load_diagram(root / "tests" / "data" / "engine_neurons.yaml"), record)
     opts = lm_options(IdentifySettings(), learned)
     assert (opts.damping, opts.trial_jacobian, opts.bounds, opts.geodesic) == ("trainlm", False, "transform", 0.75)
+    # the tanh basis's weights enter linearly: no valley, so Nielsen's schedule, in the transform's coordinates
+    basis = build_problem(load_diagram(root / "diagrams" / "engine.yaml"), record)
+    opts = lm_options(IdentifySettings(), basis)
+    assert (opts.damping, opts.trial_jacobian, opts.bounds, opts.geodesic) == ("nielsen", True, "transform", 0.75)
     chart = load_diagram(root / "diagrams" / "engine.yaml")
     fixed = dataclasses.replace(chart, blocks=tuple(dataclasses.replace(b, fixed=True) if b.kind == "nonlinear" else b
                                                     for b in chart.blocks))

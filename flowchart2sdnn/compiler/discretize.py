@@ -89,7 +89,7 @@ def initial_nonlinear_weights(block: Block, seed: int, position: int,
         block = replace(block, weights=basis_weights(diagram, block, block.span or 1.0))
     if block.weights is not None:
         w = block.weights
-        return {"a": np.array(w.a), "v": np.array(w.v), "b": np.array(w.b) if w.b is not None else np.zeros(s),
+        return {"a": np.array(w.a), "v": np.array(w.v), "b": np.array(w.b) if w.b is not None else np.zeros(len(w.a)),
                 "c": None if w.c is None else float(w.c)}
     lo, hi = block.init_range or (-0.5, 0.5)
     rng = np.random.default_rng([seed, position])
@@ -128,10 +128,11 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int
             if b.kind in _SINGLE:
                 return [Connection(Source("neuron", b.name), mul(coef, const(output_scale(b))), delay, None, path)]
             if b.kind == "nonlinear":
+                n = len(initial[b.name]["a"])  # stored weights say how many (a chart edited in code may differ)
                 out = [Connection(Source("neuron", b.name, i), coef, delay, f"{b.name}.v{i + 1}", path)
-                       for i in range(b.neurons)]
+                       for i in range(n)]
                 if linear_term[b.name]:  # the linear term: a linear neuron after the tanh ones
-                    out.append(Connection(Source("neuron", b.name, b.neurons), coef, delay, f"{b.name}.c", path))
+                    out.append(Connection(Source("neuron", b.name, n), coef, delay, f"{b.name}.c", path))
                 return out
             if b.kind == "constant":
                 return [Connection(Source("bias", b.name), mul(coef, b.k), 0, None, path)]
@@ -209,7 +210,7 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int
                     diagram.file, b.location.line if b.location else None, block=b.name,
                     hint="put a sum or function block in between")
             per_neuron = []
-            for i in range(b.neurons):
+            for i in range(len(w["a"])):
                 conns = tuple(
                     Connection(c.source, c.coef, c.delay, f"{b.name}.a{i + 1}", c.origin) for c in base
                 )
@@ -220,7 +221,7 @@ def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int
                 free.append((f"{b.name}.v{i + 1}", b.name, "v", float(w["v"][i]), "v" not in learned))
                 if b.bias:
                     free.append((f"{b.name}.b{i + 1}", b.name, "b", float(w["b"][i]), "b" not in learned))
-            transfers = ("tanh",) * b.neurons
+            transfers = ("tanh",) * len(w["a"])
             if linear_term[b.name]:  # c x: a linear neuron fed by the input as it is, c on its consumers
                 per_neuron.append(base)
                 transfers += ("linear",)

@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import json
 import math
+from dataclasses import replace
 from pathlib import Path
 
 from ..diagram.dump import with_values
@@ -279,10 +280,18 @@ def _values(data: dict) -> tuple[dict[str, float], dict[str, dict]]:
 
 
 def apply_result_file(diagram: Diagram, path: str | Path) -> Diagram:
-    """The chart with the identified values of a result file (matching names; others unchanged)."""
-    params, nonlinear = _values(load_result(path))
+    """The chart with the identified values of a result file (matching names; others unchanged), on the network
+    they were fitted on where the chart leaves its sub-steps (auto) or delays open."""
+    data = load_result(path)
+    params, nonlinear = _values(data)
     nonlinear = _matching_curves(diagram, nonlinear, str(path))
-    return with_values(diagram, params, nonlinear)
+    chart = with_values(diagram, params, nonlinear)
+    disc = data.get("discretization") if isinstance(data.get("discretization"), dict) else {}
+    if chart.substeps in (None, "auto") and isinstance(disc.get("substeps"), int):
+        chart = replace(chart, substeps=disc["substeps"])
+    if chart.delays is None and isinstance(disc.get("delays"), str):
+        chart = replace(chart, delays=disc["delays"])
+    return chart
 
 
 def fix_from_result(diagram: Diagram, path: str | Path) -> tuple[Diagram, list[str]]:

@@ -35,7 +35,7 @@ from ..fit.lm import CONVERGED_STATUSES, CRAWL_DETAIL, LMOptions, LMResult
 from ..fit.multistart import draw_starts, run_multistart
 from .curvestart import curve_start
 from .evidence import assess, no_excitation_message, on_bound_warnings, sqrt_domain_warnings, start_stability
-from .floor import floor_warnings, measure_floor, oracle_runs
+from .floor import FLOOR_WARN, floor_warnings, measure_floor, oracle_runs
 from .floorbias import estimate_floor_bias, floor_bias_warnings
 from .initstate import estimate_initial_state
 from .perrecord import per_record_estimates
@@ -58,11 +58,12 @@ from .settings import (
     CRAWL_ITERATIONS,
     CRAWL_NOISE,
     FAR_ABOVE_NOISE,
-    FLOOR_SHARE,
     HELD_CHATTER,
     IDENTIFY_DAMPING,
     MIN_REL_COST_CHANGE,
     NEGLIGIBLE_GAIN,
+    NEGLIGIBLE_PACE,
+    PACE_ITERATIONS,
     IdentifySettings,
 )
 from .shootauto import SUSPECT_PEAK, chaotic_at, choose_shooting, second_look
@@ -213,7 +214,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
             again = identify(replace(with_values(diagram, params, curves), substeps=finer), given, validation,
                              replace(settings, shooting=requested_shooting), progress, executor, stop)
             note = (f"substeps auto: N = {problem.network.substeps}, read at the chart's init, is too coarse for the "
-                    f"fitted curves (the network's step error above {FLOOR_SHARE:g}x the residual, or a mode held at "
+                    f"fitted curves (the network's step error above {FLOOR_WARN:g}x the residual, or a mode held at "
                     f"the step's stability limit); refitted from that fit at N = {finer}")
             inits = {p.name: float(p.init) for p in diagram.parameters}
             again_params = {n: replace(e, init=inits.get(n, e.init)) for n, e in again.parameters.items()}
@@ -254,7 +255,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
 def _finer_substeps(diagram: Diagram, problem: Problem, floor: dict, rms: dict, out: _Outcome,
                     status: str) -> int | None:
     """N x 4 (at most AUTO_CAP) when `substeps` is auto and, after a finished fit, the network's step error (the
-    floor) exceeds FLOOR_SHARE of the training residual on an output, or the fitted network's alternating mode at
+    floor) exceeds FLOOR_WARN of the training residual on an output, or the fitted network's alternating mode at
     rest keeps more than HELD_CHATTER of its amplitude a step (a curve held by the scheme); else None."""
     if requested_substeps(diagram) not in (None, "auto") or out.lm is None or out.interrupted:
         return None
@@ -263,7 +264,7 @@ def _finer_substeps(diagram: Diagram, problem: Problem, floor: dict, rms: dict, 
     n = problem.network.substeps
     if n >= AUTO_CAP:
         return None
-    over = any(r is not None and rms.get(k) and r > FLOOR_SHARE * rms[k] for k, r in floor["rms"].items())
+    over = any(r is not None and rms.get(k) and r > FLOOR_WARN * rms[k] for k, r in floor["rms"].items())
     held = problem.stability(out.x)[0] > HELD_CHATTER
     return min(AUTO_CAP, 4 * n) if over or held else None
 
@@ -375,9 +376,10 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
     slopes |= {w.name for w in problem.network.free_weights if w.role == "v" and w.block not in basis}
     groups = tuple(-1 if n in slopes else i for i, n in enumerate(problem.names))
     learned = any(n in slopes for n in problem.names)
+    curves = any(w.name in problem.names for w in problem.network.free_weights)
     bounds = settings.lm_bounds
     if bounds == "auto":  # the transform where learned curves are fitted (settings.LM_BOUNDS)
-        bounds = "transform" if learned else "box"
+        bounds = "transform" if curves else "box"
     damping = settings.lm_damping
     if damping == "auto":  # trainlm's where learned curves are fitted (settings.IDENTIFY_DAMPING, LM_BOUNDS)
         damping = "trainlm" if learned else "trust" if bounds == "box" else IDENTIFY_DAMPING
@@ -387,6 +389,7 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
                      stall_decrease=settings.converged_decrease / max(1, problem.n_residuals),
                      crawl_decrease=CRAWL_DECREASE / max(1, problem.n_residuals) if floor > 0 else 0.0,
                      crawl_iterations=CRAWL_ITERATIONS, crawl_cost=floor, negligible_gain=NEGLIGIBLE_GAIN,
+                     negligible_pace=NEGLIGIBLE_PACE, pace_iterations=PACE_ITERATIONS,
                      residual_stride=len(problem.compiled.output_names),
                      scale=settings.lm_scale, scale_groups=groups if settings.lm_scale == "jac" else (),
                      geodesic=settings.lm_geodesic if bounds == "transform" else 0.0, damping=damping,

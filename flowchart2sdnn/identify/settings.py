@@ -12,7 +12,7 @@ import math
 from dataclasses import dataclass, field
 
 __all__ = ["IdentifySettings", "SHOOTING", "SHOOTING_STARTS", "IDENTIFY_TAU", "REFIT_TAU", "ONLINE_TAU", "MIN_REL_COST_CHANGE",
-           "CONVERGED_DECREASE", "NEGLIGIBLE_GAIN", "FLOOR_SHARE", "HELD_CHATTER", "IDENTIFY_SCALE", "IDENTIFY_DAMPING", "LM_DAMPING", "LM_BOUNDS", "FLOOR_BIAS", "CURVE_START"]
+           "CONVERGED_DECREASE", "NEGLIGIBLE_GAIN", "NEGLIGIBLE_PACE", "PACE_ITERATIONS", "HELD_CHATTER", "IDENTIFY_SCALE", "IDENTIFY_DAMPING", "LM_DAMPING", "LM_BOUNDS", "FLOOR_BIAS", "CURVE_START"]
 
 #: First LM damping mu = tau * max diag(JᵀJ) (Madsen-Nielsen-Tingleff) for a fit from a chart's rough `init`:
 #: with trainlm's fixed 1e-3 a single start from the paper's Table 1 reached J1 in 2 of 5 seeds, with this 5/5.
@@ -53,7 +53,10 @@ LM_DAMPING = "auto"
 #: IdentifySettings.lm_bounds's default: "auto" handles the bounds without a transform ("box": plain steps in the
 #: physical, column-scaled coordinates held inside the bounds, fit.boxstep; their length set by a trust radius,
 #: fit.lm damping "trust", as scipy's trf does) where no learned curve is fitted, by the transform of
-#: fit.transforms elsewhere (the learned curves' valley needs the geodesic steps measured with it). Coulomb bench
+#: fit.transforms elsewhere: a learned curve starts flat, so the physical parameters may first have to move by
+#: decades (the engine example from Table 1's J1 = 0.01, 19x below the machine: the box's trust radius collapsed
+#: at J1 0.010, the transform's log-like coordinates reach 0.191), and free-slope curves' valley needs the
+#: geodesic steps measured with it. Coulomb bench
 #: (benchmarks/bench_rough_init.py, 30 s, 8 rough draws, one run): 0.88x scipy trf's seconds per draw (median 16
 #: iterations), the transform's geodesic steps 1.95x (22); same minima, every draw converged (docs/rough_init.md).
 LM_BOUNDS = "auto"
@@ -79,13 +82,17 @@ CRAWL_NOISE = 1.2
 #: within sqrt(0.1) = 0.32 standard errors in every direction, which moves a 95 % interval's coverage by about
 #: one point.
 NEGLIGIBLE_GAIN = 0.1
+#: ... or when its last 10 iterations together gained less than one unit (a descent held by a bound, the stability
+#: guard or the trust radius, which the unconstrained Gauss-Newton step does not see): at that pace forty more
+#: iterations would not reach the 3.84 units a test at the 5 % level needs. Units count the residual's effective
+#: samples (fit.effective): a residual that is mostly a missing effect holds far fewer than its length.
+NEGLIGIBLE_PACE = 1.0
+PACE_ITERATIONS = 10
 #: With `substeps: auto` (N read from the modes at the chart's init, compiler.substeps) a fit whose network's own
-#: step error against the continuous chart (the floor) exceeds this share of the residual RMS on an output is
-#: refitted from its values at 4x N (up to the cap): the learned friction the data gave the chart is stiffer than
-#: its flat init, and beyond half the residual (a quarter of its variance) the residual is the scheme's, not the
-#: machine's.
-FLOOR_SHARE = 0.5
-#: ... and so is a fit whose network, linearized at rest, has an alternating mode (a negative eigenvalue, 1 - s h/J
+#: step error against the continuous chart exceeds the floor warning's share of the residual (identify.floor.
+#: FLOOR_WARN) is refitted from its values at 4x N (up to the cap): the learned friction the data gave the chart is
+#: stiffer than its flat init, and the warning would otherwise name the sub-steps auto should have taken.
+#: So is a fit whose network, linearized at rest, has an alternating mode (a negative eigenvalue, 1 - s h/J
 #: for a friction slope s) that keeps more than this share of its amplitude a step: the continuous chart's mode
 #: decays without alternating, so that mode is the explicit step's, and the curve's slope is held near the step's
 #: limit 2J/h (the guard's chatter radius 1) by the scheme rather than by the data.
