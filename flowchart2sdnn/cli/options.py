@@ -20,7 +20,7 @@ from ..errors import SdnnError
 
 __all__ = ["fail", "handle_errors", "settings_usage", "executor_options", "force_option", "seed_option",
            "map_option", "unit_option", "data_options", "column_reading", "rows_option", "windowed", "alignment_option", "max_iter_option",
-           "substeps_option", "with_substeps", "ALIGNMENT_HELP", "html_option", "require_figures"]
+           "substeps_option", "with_substeps", "timebase_options", "read_records", "ALIGNMENT_HELP", "html_option", "require_figures"]
 
 ALIGNMENT_HELP = "zoh: input sample k acts on [t_k, t_k+1) (logged data); direct: output k uses input k."
 
@@ -156,6 +156,41 @@ def column_reading(diagram, mapping, units) -> tuple[dict[str, str], dict[str, f
     except ValueError as exc:
         raise click.BadParameter(str(exc), param_hint="'--unit'") from None
 
+
+
+_DELIMITER_CHOICES = {"auto": "auto", ",": ",", ";": ";", "tab": "\t", "|": "|"}
+
+
+def timebase_options(func):
+    """``--delimiter``, ``--decimal`` and ``--resample``: how a command reads its CSV files' dialect and time
+    base (see data.timebase and docs/data_and_time.md)."""
+    func = click.option("--resample", is_flag=True,
+                        help="Resample records logged at another rate than the chart's sample time to it "
+                             "(scipy.signal.resample_poly; a note says so). Without it such a record is refused.")(func)
+    func = click.option("--decimal", type=click.Choice([".", ",", "auto"]), default="auto", show_default=True,
+                        help="Decimal mark of the CSV files; auto: a comma where the delimiter is not one and the "
+                             "first data row is written so (a note says so).")(func)
+    return click.option("--delimiter", type=click.Choice(list(_DELIMITER_CHOICES)), default="auto",
+                        show_default=True,
+                        help="Field delimiter of the CSV files; auto: the one that splits the header into the most "
+                             "fields (a note says when it is not ',').")(func)
+
+
+def read_records(paths, diagram, maps, scales, delimiter: str, decimal: str, resample: bool,
+                 window: bool = True) -> list:
+    """The records of the CSV files `paths` on the chart's time base (data.timebase.conform: jitter snapped,
+    gaps split, with --resample another rate resampled), each cut to --rows first when `window`."""
+    from ..data.csvdata import read_csv
+    from ..data.timebase import conform
+    from ..identify.problem import required_columns
+
+    cols = required_columns(diagram)
+    out = []
+    for path in paths:
+        data = read_csv(path, cols, maps, None, scale=scales, delimiter=_DELIMITER_CHOICES[delimiter],
+                        decimal=decimal, check_steps=False)
+        out += conform(windowed(data) if window else data, diagram.sample_time, resample)
+    return out
 
 
 def _parse_rows(ctx, param, value):
