@@ -191,13 +191,18 @@ def prepared(diagram: Diagram, data: Dataset | Sequence[Dataset], validation: Da
 
 
 def with_data_notes(ident: Identification, records: Sequence[Dataset]) -> Identification:
-    """`ident` with the records' data notes (timebase, delimiter) before its own warnings."""
+    """`ident` with the records' data notes (time base, delimiter) before its own warnings, and after them the
+    warning of a residual that follows a held input at lag 0 (identify.lagzero)."""
     from dataclasses import replace
 
     from .data.timebase import record_notes
+    from .identify.lagzero import lag_zero_warnings
 
     notes = record_notes(records)
-    return replace(ident, warnings=tuple(notes) + tuple(ident.warnings)) if notes else ident
+    lag = lag_zero_warnings(ident.problem, ident.x) if ident.problem is not None and ident.x is not None else []
+    if not notes and not lag:
+        return ident
+    return replace(ident, warnings=tuple(notes) + tuple(ident.warnings) + tuple(lag))
 
 
 def _chart(chart: Diagram | str | Path) -> Diagram:

@@ -16,7 +16,7 @@ from scipy.integrate import solve_ivp
 T = 0.01
 #: the input's band (Hz): linear interpolation at 10 ms misses a line of f Hz by about (2 pi f T)^2 / 12 of
 #: itself in the step means (0.3 % at 3 Hz), so the band stays well below the 10 Hz resonance
-BAND = 3.5
+BAND = 2.5
 SCALE = 3000.0
 TRUE = {"m": 1.0, "k": (2 * np.pi * 10.0) ** 2, "d": 2 * 0.05 * 2 * np.pi * 10.0, "k3": 1200.0}
 

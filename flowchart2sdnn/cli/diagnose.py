@@ -19,6 +19,7 @@ from .options import (
     force_option,
     handle_errors,
     html_option,
+    intersample_option,
     max_iter_option,
     read_records,
     require_figures,
@@ -28,6 +29,7 @@ from .options import (
     shooting_option,
     substeps_option,
     timebase_options,
+    with_intersample,
     with_substeps,
 )
 from .terminal import Progress
@@ -106,6 +108,7 @@ def _int_list(text: str) -> tuple[int, ...]:
               help="Trace even when the first fit of the chart as given did not converge (default: refuse).")
 @alignment_option()
 @substeps_option()
+@intersample_option()
 @data_options
 @timebase_options
 @rows_option("each training record")
@@ -117,7 +120,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 @handle_errors
 def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
              refit_iter, max_iter, horizon, top, second_look, criterion, min_gain, spread_z, alpha, dead_time_max, harmonics, init_window,
-             shooting, allow_unconverged, alignment, substeps, mapping, units, delimiter, decimal, resample, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
+             shooting, allow_unconverged, alignment, substeps, intersample, mapping, units, delimiter, decimal, resample, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
     """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
     chart, refit, and report the error before and after."""
     from ..atomic import atomic_write_text, check_output_path
@@ -151,7 +154,7 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     except ValueError as exc:
         raise click.UsageError(f"{effects_file}: {exc}") from None
     effects = select_effects(parse_effects(effect_names), library)
-    diagram = with_substeps(load_diagram(chart), substeps)
+    diagram = with_intersample(with_substeps(load_diagram(chart), substeps), intersample)
     maps, scales = column_reading(diagram, mapping, units)
     dialect = (delimiter, decimal, resample)
     train = read_records(data, diagram, maps, scales, *dialect)

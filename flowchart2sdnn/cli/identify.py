@@ -18,6 +18,7 @@ from .options import (
     force_option,
     handle_errors,
     html_option,
+    intersample_option,
     max_iter_option,
     read_records,
     require_figures,
@@ -27,6 +28,7 @@ from .options import (
     shooting_option,
     substeps_option,
     timebase_options,
+    with_intersample,
     with_substeps,
 )
 from .terminal import CtrlC, Progress
@@ -87,6 +89,7 @@ __all__ = ["identify"]
                  "limit is reported as not converged.", default=1000)
 @alignment_option()
 @substeps_option()
+@intersample_option()
 @data_options
 @timebase_options
 @rows_option("each training record")
@@ -99,7 +102,7 @@ __all__ = ["identify"]
 @executor_options("the multi-start fits")
 @handle_errors
 def identify(data, chart, output, fix_from, validation, init_window, shooting, shooting_starts, threads, floor_bias, curve_start, lm_steps, lm_bounds, split, starts, seed, online, window, average,
-             max_iter, alignment, substeps, mapping, units, delimiter, decimal, resample, plots, html_path, force,
+             max_iter, alignment, substeps, intersample, mapping, units, delimiter, decimal, resample, plots, html_path, force,
              quiet, workers=None, scheduler=None) -> None:
     """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
     together, each simulated from its own initial state)."""
@@ -128,7 +131,7 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
         check_output_path(chart_out, inputs, force=force)
     if html_path:
         check_output_path(html_path, inputs, force=force)
-    diagram = with_substeps(load_diagram(chart), substeps)
+    diagram = with_intersample(with_substeps(load_diagram(chart), substeps), intersample)
     fixed = []
     if fix_from:
         diagram, fixed = fix_from_result(diagram, fix_from)

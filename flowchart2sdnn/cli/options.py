@@ -20,7 +20,8 @@ from ..errors import SdnnError
 
 __all__ = ["fail", "handle_errors", "settings_usage", "executor_options", "force_option", "seed_option",
            "map_option", "unit_option", "data_options", "column_reading", "rows_option", "windowed", "alignment_option", "max_iter_option",
-           "substeps_option", "with_substeps", "timebase_options", "read_records", "ALIGNMENT_HELP", "html_option", "require_figures"]
+           "substeps_option", "with_substeps", "timebase_options", "read_records", "intersample_option",
+           "with_intersample", "ALIGNMENT_HELP", "html_option", "require_figures"]
 
 ALIGNMENT_HELP = "zoh: input sample k acts on [t_k, t_k+1) (logged data); direct: output k uses input k."
 
@@ -298,6 +299,44 @@ def with_substeps(diagram, substeps):
     from dataclasses import replace
 
     return replace(diagram, substeps=substeps)
+
+
+def _check_intersample(ctx, param, value):
+    out = {}
+    for item in value:
+        name, equals, mode = (part.strip() for part in str(item).partition("="))
+        if not equals or not name or mode not in ("hold", "linear"):
+            raise click.BadParameter(f"{item!r} is not NAME=hold or NAME=linear", ctx=ctx, param=param)
+        out[name] = mode
+    return out
+
+
+def intersample_option():
+    """``--intersample NAME=linear`` (repeatable): what chart input NAME does between its samples, overriding the
+    chart's `intersample` (see network.inputsignal)."""
+    return click.option("--intersample", "intersample", multiple=True, metavar="NAME=hold|linear",
+                        callback=_check_intersample,
+                        help="Chart input NAME between its samples: hold (each sample acts until the next: a held "
+                             "command, the default) or linear (straight between the samples: a smooth measured "
+                             "signal); overrides the chart's inputs.NAME.intersample (repeatable).")
+
+
+def with_intersample(diagram, intersample: Mapping[str, str]):
+    """The chart with the command line's --intersample applied (a usage error naming an unknown input)."""
+    if not intersample:
+        return diagram
+    from dataclasses import replace
+
+    from ..errors import did_you_mean
+
+    names = [s.name for s in diagram.inputs]
+    for name in intersample:
+        if name not in names:
+            hint = did_you_mean(name, names)
+            raise click.BadParameter(f"'{name}' is not an input of the chart (inputs: {', '.join(names)})"
+                                     + (f"; {hint}" if hint else ""), param_hint="'--intersample'")
+    inputs = tuple(replace(s, intersample=intersample.get(s.name, s.intersample)) for s in diagram.inputs)
+    return replace(diagram, inputs=inputs)
 
 
 def html_option():
