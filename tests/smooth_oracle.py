@@ -18,6 +18,7 @@ T = 0.01
 #: itself in the step means (0.3 % at 3 Hz), so the band stays well below the 10 Hz resonance
 BAND = 2.5
 SCALE = 3000.0
+RAMP = 0.5
 TRUE = {"m": 1.0, "k": (2 * np.pi * 10.0) ** 2, "d": 2 * 0.05 * 2 * np.pi * 10.0, "k3": 1200.0}
 
 CHART = """\
@@ -61,8 +62,10 @@ def smooth_input(seed: int = 0, scale: float = SCALE, band: float = BAND):
 
     def u(t):
         t = np.asarray(t, dtype=float)
-        return scale * np.sum(a[:, None] * np.sin(2 * np.pi * f[:, None] * t.ravel()[None, :] + ph[:, None]),
-                              axis=0).reshape(t.shape)
+        # faded in from 0 over the first RAMP s: a record that starts at rest, whatever the dead time
+        ramp = np.where(t <= 0, 0.0, np.where(t < RAMP, 0.5 * (1 - np.cos(np.pi * t / RAMP)), 1.0))
+        return scale * ramp * np.sum(a[:, None] * np.sin(2 * np.pi * f[:, None] * t.ravel()[None, :] + ph[:, None]),
+                                     axis=0).reshape(t.shape)
 
     return u
 
