@@ -70,11 +70,12 @@ def smooth_input(seed: int = 0, scale: float = SCALE, band: float = BAND):
     return u
 
 
-def record(n: int = 3000, seed: int = 0, noise: float = 1e-3, tau: float = 0.0, params=None):
+def record(n: int = 3000, seed: int = 0, noise: float = 1e-3, tau: float = 0.0, params=None, band: float = BAND,
+           scale: float = SCALE):
     """(t, u samples, x samples with noise, noise sigma): the oracle sampled every T, the input sampled at t_k
     (the delay acts inside the plant); `noise` is relative to the RMS of x."""
     p = {**TRUE, **(params or {})}
-    u = smooth_input(seed)
+    u = smooth_input(seed, scale, band)
 
     def rhs(t, s):
         x, v = s

@@ -17,8 +17,8 @@ from flowchart2sdnn.identify.shooting import noise_level, noise_variance
 
 
 @functools.cache
-def _smooth():
-    return so.record(n=3000, noise=1e-3)
+def _smooth(band: float = so.BAND):
+    return so.record(n=3000, noise=1e-3, band=band)
 
 
 def _second_difference_reading(x: np.ndarray) -> float:
@@ -27,10 +27,19 @@ def _second_difference_reading(x: np.ndarray) -> float:
 
 
 def test_smooth_low_oversampled_record_reads_the_noise_not_the_curvature():
+    # the intersample tests' record: input below 2.5 Hz, resonance at 10 Hz = 10 samples per period
     _, _, x, sigma = _smooth()
-    assert _second_difference_reading(x) > 50 * sigma  # the old reading: the curvature
+    assert _second_difference_reading(x) > 5 * sigma  # the old reading: the curvature
     estimate = float(np.sqrt(noise_variance(x[:, None])[0]))
     assert 0.8 * sigma < estimate < 1.3 * sigma
+
+
+def test_input_up_to_the_resonance_reads_within_a_few_times_the_noise():
+    # input lines up to 12 Hz: the hardening spring's harmonics fill every band of the spectrum with signal,
+    # so no reading of the record alone finds the bare noise; the old one was 200x off
+    _, _, x, sigma = _smooth(12.0)
+    assert _second_difference_reading(x) > 100 * sigma
+    assert sigma < float(np.sqrt(noise_variance(x[:, None])[0])) < 3 * sigma
 
 
 def test_fast_sampled_record_keeps_the_second_difference_reading():

@@ -22,7 +22,7 @@ damping        speed, speed diff.  viscous gain with a new parameter (0) in the 
 (coulomb)      speed               Fc*sign_smooth(w) + c + dFv*max(w, 0), new parameters at 0: asymmetric
                                    Coulomb and viscous friction with physical parameters (an option of
                                    friction; not in the registry on its own)
-dead_time      input               a delay of n samples in front of every consumer of the input
+dead_time      input               a dead time tau (s) on the input, started at n samples (scanned), fitted on
 saturation     input               L*sat((u - o)/L) + o: a hard clip at o -/+ L, L scanned in the data range
 sensor_limit   output              the same clip on a measured output (a sensor or its converter at its range);
                                    the chart's block is renamed, the output reads the clipped signal (an
@@ -318,15 +318,18 @@ class Damping:
 
 @dataclass(frozen=True)
 class DeadTime:
-    """A pure delay of n samples on an input; n is scanned over ``1..max_samples``."""
+    """A dead time on an input: its `delay`, a new parameter tau in seconds started at n samples (n scanned
+    over ``1..max_samples``) and fitted on from there as a fraction of a sample where the refit finds one
+    (network.inputsignal: the step means of the delayed input, exact in tau)."""
 
     max_samples: int = 20
     name: str = "dead_time"
     neutral: bool = False
-    extra_dof: int = 1  # n is estimated too (by the scan)
+    extra_dof: int = 0  # the scanned n is where tau starts; tau itself is the new quantity
 
     def places(self, diagram: Diagram) -> tuple[Place, ...]:
-        return input_places(diagram)
+        delayed = {s.name for s in diagram.inputs if s.delay is not None}
+        return tuple(p for p in input_places(diagram) if p.at not in delayed)
 
     def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
         return tuple(range(1, self.max_samples + 1))
@@ -335,12 +338,15 @@ class DeadTime:
         n = int(option) if option is not None else 1
         if n < 1:
             raise ValueError(f"dead_time needs n >= 1 samples, got {n}")
-        name = fresh_name(diagram, f"dead_{place.at}")
-        block = Block(name, "delay", (Term(place.at),), n=n, description=f"dead time of {place.at} (diagnose)")
-        return reroute(add_blocks(diagram, [block]), place.at, name, keep={name})
+        pname = fresh_name(diagram, f"tau_{place.at}")
+        T = diagram.sample_time
+        p = Parameter(pname, n * T, unit="s", min=0.0, max=(self.max_samples + 1) * T,
+                      description=f"dead time of {place.at} (diagnose)")
+        inputs = tuple(replace(s, delay=pname) if s.name == place.at else s for s in diagram.inputs)
+        return add_blocks(replace(diagram, inputs=inputs), [], [p])
 
     def describe(self) -> str:
-        return f"dead_time: a delay of n = 1..{self.max_samples} samples on an input"
+        return f"dead_time: a dead time on an input, fitted from n = 1..{self.max_samples} samples"
 
     def label(self, option) -> str:
         return f"n={int(option)}"
