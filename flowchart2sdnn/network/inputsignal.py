@@ -10,7 +10,10 @@ integrators need (the step adds h/J times the torque's integral over it), it is 
 ``hold`` without a delay (so held charts run as before), the midpoint value under ``linear``, and it is
 continuous and piecewise smooth in tau, with the exact derivative
 
-    d/dtau mean_[a, b] u(t - tau) dt = -(u(b - tau) - u(a - tau)) / h.
+    d/dtau mean_[a, b] u(t - tau) dt = -(u(b - tau) - u(a - tau)) / h
+
+(a held signal's step means have a kink where a step boundary crosses a sample, e.g. at whole-sample delays:
+there the mean of the two one-sided derivatives).
 
 Before the first sample the signal is the first sample; after the last, under ``hold``, the last sample, under
 ``linear`` the line through the last two samples for one more sample, then constant (with the zoh alignment
@@ -75,11 +78,21 @@ def _knots(x: np.ndarray, linear: bool, shift: float) -> tuple[np.ndarray, int]:
     return np.concatenate([np.full(pad, x[0]), x, [end] * (pad + 1)]), pad
 
 
+#: a position this close to a whole sample is on a held signal's jump
+ON_JUMP = 1e-9
+
+
 def _value(knots: np.ndarray, s: np.ndarray, linear: bool) -> np.ndarray:
-    """The signal at positions s (in samples from the first knot)."""
+    """The signal at positions s (in samples from the first knot); on a held signal's jump the mean of its two
+    sides, so that the derivative in tau there is the mean of its one-sided values (what central differences
+    see) rather than whichever side rounding picks."""
     j = np.clip(np.floor(s).astype(np.int64), 0, len(knots) - 2)
     if not linear:
-        return knots[j]
+        whole = np.rint(s)
+        jump = (np.abs(s - whole) < ON_JUMP) & (whole >= 1) & (whole <= len(knots) - 2)
+        k = whole.astype(np.int64)
+        return np.where(jump, 0.5 * (knots[np.clip(k - 1, 0, len(knots) - 1)] + knots[np.clip(k, 0, len(knots) - 1)]),
+                        knots[j])
     r = s - j
     return knots[j] + r * (knots[j + 1] - knots[j])
 
