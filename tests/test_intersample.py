@@ -187,3 +187,17 @@ def test_command_line_intersample_is_the_chart_key(tmp_path):
     bad = CliRunner().invoke(main, ["identify", str(path), "--diagram", str(tmp_path / "hold.yaml"),
                                     "--intersample", "v=linear"])
     assert bad.exit_code == 2 and "'v' is not an input of the chart" in bad.output
+
+
+def test_the_online_window_sees_the_inputs_the_offline_kernels_see():
+    from flowchart2sdnn.identify.online import OnlineRun
+
+    text = _chart(", intersample: linear", substeps=3)
+    cn = CompiledNetwork(compile_diagram(diagram_from_text(text, "t.yaml")).network)
+    u = np.cumsum(np.random.default_rng(6).standard_normal((40, 1)), axis=0)
+    run = OnlineRun(cn, u, np.zeros((40, 1)))
+    np.testing.assert_allclose(run.step_inputs, cn.step_inputs(u), rtol=0, atol=0)
+    fitted = _chart(", delay: tau", "  tau: {init: 0.01, unit: s}\n")
+    cd = CompiledNetwork(compile_diagram(diagram_from_text(fitted, "t.yaml")).network)
+    with pytest.raises(SdnnError, match="FIT007"):
+        OnlineRun(cd, u, np.zeros((40, 1)))
