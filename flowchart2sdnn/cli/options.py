@@ -188,8 +188,9 @@ def read_records(paths, diagram, maps, scales, delimiter: str, decimal: str, res
     cols = required_columns(diagram)
     out = []
     for path in paths:
-        data = read_csv(path, cols, maps, None, scale=scales, delimiter=_DELIMITER_CHOICES[delimiter],
-                        decimal=decimal, check_steps=False)
+        with settings_usage():  # a decimal comma with a comma delimiter: a usage error naming the options
+            data = read_csv(path, cols, maps, None, scale=scales, delimiter=_DELIMITER_CHOICES[delimiter],
+                            decimal=decimal, check_steps=False)
         out += conform(windowed(data) if window else data, diagram.sample_time, resample)
     return out
 

@@ -701,7 +701,7 @@ def sniff_dialect(file: str, delimiter: str, decimal: str) -> tuple[str, str, li
     if decimal not in (".", ",", "auto"):
         raise ValueError(f"decimal must be '.', ',' or 'auto', not {decimal!r}")
     if delimiter == "," and decimal == ",":
-        raise ValueError("a decimal comma needs another delimiter than ',' (e.g. delimiter ';')")
+        raise ValueError("decimal ',' needs a delimiter other than ',' (e.g. delimiter ';')")
     if delimiter != "auto" and decimal != "auto":
         return delimiter, decimal, []
     head = _first_lines(file, 2)
