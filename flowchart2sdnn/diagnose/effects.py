@@ -22,7 +22,7 @@ damping        speed, speed diff.  viscous gain with a new parameter (0) in the 
 (coulomb)      speed               Fc*sign_smooth(w) + c + dFv*max(w, 0), new parameters at 0: asymmetric
                                    Coulomb and viscous friction with physical parameters (an option of
                                    friction; not in the registry on its own)
-dead_time      input               a dead time tau (s) on the input, started at n samples (scanned), fitted on
+dead_time      input               a dead time tau (s) on the input: n samples scanned, tau fitted within n -+ 1/2
 saturation     input               L*sat((u - o)/L) + o: a hard clip at o -/+ L, L scanned in the data range
 sensor_limit   output              the same clip on a measured output (a sensor or its converter at its range);
                                    the chart's block is renamed, the output reads the clipped signal (an
@@ -319,13 +319,15 @@ class Damping:
 @dataclass(frozen=True)
 class DeadTime:
     """A dead time on an input: its `delay`, a new parameter tau in seconds started at n samples (n scanned
-    over ``1..max_samples``) and fitted on from there as a fraction of a sample where the refit finds one
-    (network.inputsignal: the step means of the delayed input, exact in tau)."""
+    over ``1..max_samples``) and fitted within half a sample of n (from 0 for n = 1): the scan decides the
+    whole samples, the refit the fraction (network.inputsignal: the step means of the delayed input, exact in
+    tau). Bounded so, the options stay apart: free, every refit went to the same tau and the option reported
+    was whichever start happened to end lowest."""
 
     max_samples: int = 20
     name: str = "dead_time"
     neutral: bool = False
-    extra_dof: int = 0  # the scanned n is where tau starts; tau itself is the new quantity
+    extra_dof: int = 1  # n is estimated too (by the scan); tau is held at n samples while scored (screened)
 
     def places(self, diagram: Diagram) -> tuple[Place, ...]:
         delayed = {s.name for s in diagram.inputs if s.delay is not None}
@@ -340,13 +342,20 @@ class DeadTime:
             raise ValueError(f"dead_time needs n >= 1 samples, got {n}")
         pname = fresh_name(diagram, f"tau_{place.at}")
         T = diagram.sample_time
-        p = Parameter(pname, n * T, unit="s", min=0.0, max=(self.max_samples + 1) * T,
+        p = Parameter(pname, n * T, unit="s", min=0.0 if n == 1 else (n - 0.5) * T, max=(n + 0.5) * T,
                       description=f"dead time of {place.at} (diagnose)")
         inputs = tuple(replace(s, delay=pname) if s.name == place.at else s for s in diagram.inputs)
         return add_blocks(replace(diagram, inputs=inputs), [], [p])
 
+    def screened(self, diagram: Diagram) -> Diagram:
+        """The patched chart as the score test sees it: tau held at its n samples (the scan ranks whole n)."""
+        held = {s.delay for s in diagram.inputs if s.delay is not None}
+        return replace(diagram, parameters=tuple(replace(p, fixed=True) if p.name in held and
+                                                 p.description and "(diagnose)" in p.description else p
+                                                 for p in diagram.parameters))
+
     def describe(self) -> str:
-        return f"dead_time: a dead time on an input, fitted from n = 1..{self.max_samples} samples"
+        return f"dead_time: a dead time on an input, n = 1..{self.max_samples} samples and the fraction fitted"
 
     def label(self, option) -> str:
         return f"n={int(option)}"
