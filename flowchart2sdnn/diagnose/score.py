@@ -55,7 +55,7 @@ from ..strictjson import finite_or_none
 from .effects import Effect
 from .graph import Place
 
-__all__ = ["RCOND", "Candidate", "Baseline", "Score", "Screen", "gauss_newton_decrease", "new_quantities",
+__all__ = ["RCOND", "Candidate", "Baseline", "Score", "Screen", "gauss_newton_decrease", "new_quantities", "screened",
            "screen"]
 
 RCOND = 1e-12
