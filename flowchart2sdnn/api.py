@@ -199,7 +199,9 @@ def with_data_notes(ident: Identification, records: Sequence[Dataset]) -> Identi
     from .identify.lagzero import lag_zero_warnings
 
     notes = record_notes(records)
-    lag = lag_zero_warnings(ident.problem, ident.x) if ident.problem is not None and ident.x is not None else []
+    # the fit's own point: with per-record quantities ident.x holds their mean, the optimizer's result all of them
+    point = getattr(ident.lm, "x", None) if ident.lm is not None else ident.x
+    lag = lag_zero_warnings(ident.problem, point) if ident.problem is not None and point is not None else []
     if not notes and not lag:
         return ident
     return replace(ident, warnings=tuple(notes) + tuple(ident.warnings) + tuple(lag))

@@ -34,7 +34,10 @@ def lag_zero_correlations(problem, x) -> dict[tuple[str, str, str], tuple[float,
     """{(input, output, "u" or "du"): (r, chance standard deviation)} of the free-run residual against each held
     input ("u") and its change over the sample ("du") at lag 0 over the training records; empty when the run
     diverges."""
-    e_all = problem.residual(np.asarray(x, dtype=float))
+    x = np.asarray(x, dtype=float)
+    if x.shape != (len(problem.names),):  # a point of another shape (the per-record values' mean): not the fit's
+        return {}
+    e_all = problem.residual(x)
     if e_all is None:
         return {}
     net = problem.network
