@@ -149,3 +149,17 @@ def test_resample_on_the_command_line_notes_and_fits(files):
 def test_explicit_comma_delimiter_still_refuses_a_semicolon_file(files):
     res = _cli(files["semicolon"], "--delimiter", ",")
     assert res.exit_code == 1 and "error[CSV014]" in res.stderr
+
+
+def test_a_held_input_fitted_right_raises_no_lag_zero_warning(clean):
+    # the record's force is truly held (lsim with zero-order hold): the residual is noise, no false alarm
+    assert not any("lag 0" in w for w in clean.warnings), clean.warnings
+
+
+@pytest.mark.parametrize("case", ["10ms", "off_grid"])
+def test_diagnose_refuses_like_identify(files, case):
+    with pytest.raises(SdnnError) as info:
+        sd.diagnose(CHART, sd.read_csv(files[case]))
+    res = CliRunner().invoke(main, ["diagnose", str(files[case]), "--diagram", CHART])
+    assert res.exit_code == 1
+    assert res.stderr.strip() == info.value.diagnostics[0].one_line()
