@@ -53,7 +53,8 @@ def compile_chart(chart: Diagram | str | Path, seed: int = 0, substeps: int | st
 
 
 def read_csv(path: str | Path, map: Mapping[str, str] | None = None, chart: Diagram | str | Path | None = None,
-             sample_time: float | None = None, units: Mapping[str, str] | None = None) -> Dataset:
+             sample_time: float | None = None, units: Mapping[str, str] | None = None, delimiter: str = "auto",
+             decimal: str = "auto") -> Dataset:
     """A record from a CSV file: every column (or only the ones `chart` needs), checked value by value.
 
     Parameters
@@ -65,11 +66,18 @@ def read_csv(path: str | Path, map: Mapping[str, str] | None = None, chart: Diag
     chart : Diagram or path, optional
         Keep only the columns this chart needs (and check its sample time against the time column).
     sample_time : float, optional
-        Expected time step in seconds (default: the chart's, else the median step of the time column).
+        Expected time step in seconds: each step is checked against it here (CSV020, CSV021). Without it the
+        time column is read as logged and :func:`identify` and :func:`diagnose` check it against the chart's
+        sample time as the command line does (snapping jitter, splitting at gaps, each with a note in the
+        record's ``notes``; see docs/data_and_time.md).
     units : {column: unit}, optional
         Columns logged in another unit than the chart's (``{"speed_rpm": "rpm", "t_ms": "ms"}``), converted to
         the chart's unit of the signal they feed; needs `chart`. ValueError naming an item that does not fit.
+    delimiter, decimal : str
+        ``","``, ``";"``, tab, ``"|"`` / ``"."``, ``","``; "auto" (default) reads them off the file, with a
+        note when they are not ``","`` and ``"."``.
     """
+    dialect = {"delimiter": delimiter, "decimal": decimal, "check_steps": sample_time is not None}
     mapping = dict(map or {})
     if chart is not None:
         diagram = _chart(chart)
@@ -77,17 +85,16 @@ def read_csv(path: str | Path, map: Mapping[str, str] | None = None, chart: Diag
         from .identify.problem import required_columns
 
         scale = unit_scales(diagram, units or {}, mapping)
-        return _read_csv_columns(path, required_columns(diagram), mapping, sample_time or diagram.sample_time,
-                                 scale=scale)
+        return _read_csv_columns(path, required_columns(diagram), mapping, sample_time, scale=scale, **dialect)
     if units:
         raise ValueError("units need the chart whose units the columns are converted to (give chart=...)")
-    header = _header(path)
+    header = _header(path, delimiter)
     mapped_from = set(mapping.values()) | {source_header(h) for h in mapping.values()}
     time_header = source_header(mapping["time"]) if "time" in mapping else \
         next((h for h in header if h.lower() in TIME_COLUMNS), None)
     names = [n for n in mapping if n != "time"]
     names += [h for h in header if h not in mapped_from and h != time_header and h not in names]
-    return _read_csv_columns(path, names, mapping, sample_time)
+    return _read_csv_columns(path, names, mapping, sample_time, **dialect)
 
 
 def dataset_from_frame(frame, time: str | None = None, inputs: Sequence[str] | None = None,
@@ -129,29 +136,75 @@ def dataset_from_frame(frame, time: str | None = None, inputs: Sequence[str] | N
         digest.update(c.encode())
         digest.update((t if c == time else values[c]).tobytes())
     return Dataset(path=name, columns=values, time=t, n_rows=n, sample_time=step, max_step_deviation=deviation,
-                   sha256=digest.hexdigest(), source_columns={c: c for c in wanted})
+                   sha256=digest.hexdigest(), source_columns={c: c for c in wanted}, time_column=time)
 
 
 def identify(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset], validation: Dataset | None = None,
-             **settings) -> Identification:
+             resample: bool = False, **settings) -> Identification:
     """Identify the chart's physical parameters and learned curves from measured records.
 
+    Each record's time column is checked against the chart's sample time first, as ``sdnn identify`` does
+    (:func:`~flowchart2sdnn.data.timebase.conform`: jitter snapped to the grid, a record split at its gaps,
+    with `resample` data of another rate resampled; each with a note among the answer's ``.warnings``).
     `settings` are the fields of :class:`~flowchart2sdnn.identify.settings.IdentifySettings` by name
     (``starts=8, seed=1, max_iter=300, split=0.7, online=True, ...``). The answer's ``.parameters`` maps each
     name to an :class:`~flowchart2sdnn.identify.result.Estimate` (value, ci95, unit), ``.chart`` is the
     identified chart, ``.simulate(data)`` runs it, ``.to_json()`` is the RESULT.json text.
     """
-    return _identify(_chart(chart), data, validation, **settings)
+    diagram = _chart(chart)
+    train, val = prepared(diagram, data, validation, resample)
+    return with_data_notes(_identify(diagram, train, val, **settings), [*train, *([val] if val else [])])
 
 
 def diagnose(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset],
-             validation: Sequence[Dataset] = (), **settings) -> Diagnosis:
+             validation: Sequence[Dataset] = (), resample: bool = False, **settings) -> Diagnosis:
     """Trace the residual of a fit of `chart` to effects the chart lacks, add them, refit, report.
 
-    `settings` are the fields of :class:`~flowchart2sdnn.diagnose.loop.DiagnoseSettings` by name
-    (``rounds=2, seed=0, ...``). The answer's ``.diagram`` is the augmented chart, ``.report`` the REPORT.json body.
+    The records' time columns are checked and prepared as for :func:`identify` (their notes in the report's
+    ``data_notes``). `settings` are the fields of :class:`~flowchart2sdnn.diagnose.loop.DiagnoseSettings` by
+    name (``rounds=2, seed=0, ...``). The answer's ``.diagram`` is the augmented chart, ``.report`` the
+    REPORT.json body.
     """
-    return _diagnose(_chart(chart), data, tuple(validation), DiagnoseSettings(**settings))
+    from .data.timebase import conform, record_notes
+
+    diagram = _chart(chart)
+    records = [data] if isinstance(data, Dataset) else list(data)
+    train = [p for d in records for p in conform(d, diagram.sample_time, resample)]
+    val = [p for d in validation for p in conform(d, diagram.sample_time, resample)]
+    out = _diagnose(diagram, train, tuple(val), DiagnoseSettings(**settings))
+    notes = record_notes([*train, *val])
+    if notes:
+        out.report["data_notes"] = list(notes)
+    return out
+
+
+def prepared(diagram: Diagram, data: Dataset | Sequence[Dataset], validation: Dataset | None,
+             resample: bool = False) -> tuple[list[Dataset], Dataset | None]:
+    """The training records and the validation record on the chart's time base (data.timebase.conform); a
+    validation record split at gaps is its longest part (said in its notes)."""
+    from .data.timebase import conform, longest
+
+    records = [data] if isinstance(data, Dataset) else list(data)
+    train = [p for d in records for p in conform(d, diagram.sample_time, resample)]
+    val = None if validation is None else longest(conform(validation, diagram.sample_time, resample))
+    return train, val
+
+
+def with_data_notes(ident: Identification, records: Sequence[Dataset]) -> Identification:
+    """`ident` with the records' data notes (time base, delimiter) before its own warnings, and after them the
+    warning of a residual that follows a held input at lag 0 (identify.lagzero)."""
+    from dataclasses import replace
+
+    from .data.timebase import record_notes
+    from .identify.lagzero import lag_zero_warnings
+
+    notes = record_notes(records)
+    # the fit's own point: with per-record quantities ident.x holds their mean, the optimizer's result all of them
+    point = getattr(ident.lm, "x", None) if ident.lm is not None else ident.x
+    lag = lag_zero_warnings(ident.problem, point) if ident.problem is not None and point is not None else []
+    if not notes and not lag:
+        return ident
+    return replace(ident, warnings=tuple(notes) + tuple(ident.warnings) + tuple(lag))
 
 
 def _chart(chart: Diagram | str | Path) -> Diagram:
@@ -174,9 +227,16 @@ def _column(frame, column: str, name: str) -> np.ndarray:
     return values
 
 
-def _header(path: str | Path) -> list[str]:
+def _header(path: str | Path, delimiter: str = ",") -> list[str]:
+    if delimiter == "auto":
+        from .data.csvdata import sniff_dialect
+
+        try:
+            delimiter = sniff_dialect(str(path), "auto", ".")[0]
+        except ValueError:
+            delimiter = ","
     try:
         with open(path, newline="", encoding="utf-8-sig") as f:
-            return [h.strip() for h in next(csv.reader(f), [])]
+            return [h.strip() for h in next(csv.reader(f, delimiter=delimiter), [])]
     except (OSError, UnicodeDecodeError):
         return []  # read_csv itself says what is wrong with the file

@@ -106,11 +106,11 @@ def test_patches_compose_into_one_chart():
 # ------------------------------------------------------------------------------------------------ not neutral
 @pytest.mark.parametrize("n", [1, 4])
 def test_dead_time_equals_the_chart_driven_by_the_input_shifted_by_n_samples(n):
-    # one mass: a single loop, so the delay cannot change which feedback edge the compiler delays (in the
-    # two-mass chart it does - see the report - and the oracle would measure the discretisation instead)
+    # the dead time is the input's `delay`, a new parameter started at n samples: the chart's blocks stay
     one = chart("one_mass")
     patched = DeadTime().patch(one, Place("F", "input"), n)
-    assert patched.block("Fsum").inputs[0].signal == "dead_F" and patched.block("dead_F").n == n
+    assert patched.blocks == one.blocks and patched.inputs[0].delay == "tau_F"
+    assert patched.parameter("tau_F").init == pytest.approx(n * one.sample_time)
     u = aprbs_input(2500, seed=5)
     shifted = np.concatenate([np.repeat(u[:1], n, axis=0), u[:-n]])  # history: the first sample held
     np.testing.assert_allclose(simulate(patched, u), simulate(one, shifted), rtol=1e-12, atol=1e-12)

@@ -125,8 +125,8 @@ def test_candidates_that_are_not_neutral_always_grow_the_horizon_neutral_ones_wh
     settings = DiagnoseSettings(rounds=1, top=3, refit_iter=5, max_iter=5, alpha=0.999)  # refit both
     effects = [BUILTIN_EFFECTS[n] for n in ("friction", "dead_time")]
     diagnose(chart("one_mass"), train, [val], settings, effects, executor=ex)
-    # a unit: (chart, train, records, settings, max_iter, dof, start, accepted, grow); a delay block marks
-    # dead_time; a neutral candidate (friction) grows only when its plain refit is unpredictable
-    grown = {any(b.kind == "delay" for b in u[0].blocks): u[8] for u in ex.units if u[6] == "nominal"}
+    # a unit: (chart, train, records, settings, max_iter, dof, start, accepted, grow); an input's dead time
+    # marks dead_time; a neutral candidate (friction) grows only when its plain refit is unpredictable
+    grown = {any(s.delay is not None for s in u[0].inputs): u[8] for u in ex.units if u[6] == "nominal"}
     assert grown == {True: GROW_ALWAYS, False: GROW_IF_UNPREDICTABLE}
     assert all(u[3].horizon == settings.horizon for u in ex.units)

@@ -3,7 +3,8 @@
 The generic CSV cases of tests/data/bad_csv (columns time, w1, w2 at 1 ms) are fed through the lag chart
 tests/data/bad_identify/lag.yaml (input w1, output w2); the cases specific to identification (a missing
 output or input, a time step that disagrees with the chart's sample time, --map to a missing column, a bad
-validation file) use the engine chart and tests/data/bad_identify. No case gets as far as fitting.
+validation file) use the engine chart and tests/data/bad_identify. No case gets as far as fitting. (Jittered
+timestamps and other delimiters load with a note: tests/test_timebase.py.)
 """
 
 from __future__ import annotations
@@ -41,14 +42,13 @@ CASES = [
     (BAD_CSV / "duplicate_time.csv", LAG, [], "CSV013", 1, "time column 'Time'"),
     (BAD_CSV / "time_decreasing.csv", LAG, [], "CSV019", 5, "column 'time'"),
     (BAD_CSV / "time_repeats.csv", LAG, [], "CSV019", 4, "column 'time'"),
-    (BAD_CSV / "time_jitter.csv", LAG, [], "CSV020", 7, "column 'time'"),
     (BAD_CSV / "time_in_ms.csv", LAG, [], "CSV021", 3, "column 'time'"),
     (BAD_CSV / "ragged_short.csv", LAG, [], "CSV010", 4, "2 fields"),
     (BAD_CSV / "ragged_long.csv", LAG, [], "CSV011", 3, "4 fields"),
     (BAD_CSV / "decimal_comma.csv", LAG, [], "CSV011", 2, "4 fields"),
     (BAD_CSV / "semicolon_rows.csv", LAG, [], "CSV010", 3, "1 fields"),
-    (BAD_CSV / "semicolon.csv", LAG, [], "CSV014", 1, "found ';'"),
-    (BAD_CSV / "tab.csv", LAG, [], "CSV014", 1, "found tab"),
+    (BAD_CSV / "semicolon.csv", LAG, ["--delimiter", ","], "CSV014", 1, "found ';'"),
+    (BAD_CSV / "tab.csv", LAG, ["--delimiter", ","], "CSV014", 1, "found tab"),
     (BAD_CSV / "latin1.csv", LAG, [], "CSV015", 4, "0xb0"),
     (BAD_CSV / "binary.csv", LAG, [], "CSV015", 3, "binary"),
     (BAD_CSV / "utf16.csv", LAG, [], "CSV015", 1, "UTF-16"),
@@ -64,7 +64,6 @@ CASES = [
     (BAD_ID / "output_misspelled.csv", ENGINE, [], "CSV012", 1, "column 'w1' is missing"),
     (BAD_ID / "two_speed_columns.csv", ENGINE, [], "CSV013", 1, "column 'w1'"),
     (BAD_ID / "step_mismatch.csv", ENGINE, [], "CSV021", 3, "column 'time'"),
-    (BAD_ID / "jitter_5_percent.csv", ENGINE, [], "CSV020", 7, "column 'time'"),
     (BAD_ID / "nan_in_output.csv", ENGINE, [], "CSV005", 6, "column 'w1'"),
     (BAD_ID / "text_in_input.csv", ENGINE, [], "CSV004", 4, "column 'M1'"),
     (BAD_ID / "good_small.csv", ENGINE, ["--map", "w1=speed"], "CSV016", 1, "'speed'"),

@@ -80,6 +80,7 @@ def _unused(diagram: Diagram):
             used_params |= b.k.variables
         if b.kind == "integrator" and isinstance(b.init, str):  # `init: <parameter>` (or "data")
             used_params.add(b.init)
+    used_params |= {s.delay for s in diagram.inputs if s.delay is not None}  # an input's dead time
     for p in diagram.parameters:
         if p.name not in used_params:
             yield Diagnostic("LINT003", "warning", f"parameter '{p.name}' is used by no block", _loc(diagram, p),

@@ -19,14 +19,17 @@ from .options import (
     force_option,
     handle_errors,
     html_option,
+    intersample_option,
     max_iter_option,
+    read_records,
     require_figures,
     rows_option,
     seed_option,
     settings_usage,
     shooting_option,
     substeps_option,
-    windowed,
+    timebase_options,
+    with_intersample,
     with_substeps,
 )
 from .terminal import Progress
@@ -105,7 +108,9 @@ def _int_list(text: str) -> tuple[int, ...]:
               help="Trace even when the first fit of the chart as given did not converge (default: refuse).")
 @alignment_option()
 @substeps_option()
+@intersample_option()
 @data_options
+@timebase_options
 @rows_option("each training record")
 @seed_option("Seed for initial curves.")
 @html_option()
@@ -115,18 +120,17 @@ def _int_list(text: str) -> tuple[int, ...]:
 @handle_errors
 def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
              refit_iter, max_iter, horizon, top, second_look, criterion, min_gain, spread_z, alpha, dead_time_max, harmonics, init_window,
-             shooting, allow_unconverged, alignment, substeps, mapping, units, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
+             shooting, allow_unconverged, alignment, substeps, intersample, mapping, units, delimiter, decimal, resample, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
     """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
     chart, refit, and report the error before and after."""
     from ..atomic import atomic_write_text, check_output_path
-    from ..data.csvdata import read_csv
+    from ..data.timebase import record_notes
     from ..diagnose.effects import effect_library, select_effects
     from ..diagnose.loop import DiagnoseSettings
     from ..diagnose.loop import diagnose as run_diagnose
     from ..diagnose.summary import format_report
     from ..diagram.dump import dump_diagram
     from ..diagram.validate import load_diagram
-    from ..identify.problem import required_columns
 
     if validation and split:
         raise click.UsageError("give either --validate or --split, not both")
@@ -150,11 +154,15 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     except ValueError as exc:
         raise click.UsageError(f"{effects_file}: {exc}") from None
     effects = select_effects(parse_effects(effect_names), library)
-    diagram = with_substeps(load_diagram(chart), substeps)
+    diagram = with_intersample(with_substeps(load_diagram(chart), substeps), intersample)
     maps, scales = column_reading(diagram, mapping, units)
-    cols = required_columns(diagram)
-    train = [windowed(read_csv(d, cols, maps, diagram.sample_time, scale=scales)) for d in data]
-    val = [read_csv(v, cols, maps, diagram.sample_time, scale=scales) for v in validation]
+    dialect = (delimiter, decimal, resample)
+    train = read_records(data, diagram, maps, scales, *dialect)
+    val = read_records(validation, diagram, maps, scales, *dialect, window=False)
+    notes = record_notes([*train, *val])
+    if not quiet:
+        for note in notes:
+            click.echo(f"note: {note}", err=True)
     with settings_usage():
         settings = DiagnoseSettings(rounds=rounds, top=top, second_look=second_look, refit_iter=refit_iter, max_iter=max_iter,
                                     alpha=alpha, criterion=criterion, min_gain=min_gain, spread_z=spread_z,
@@ -181,6 +189,8 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
         # after Ctrl-C the refits still running are dropped, not waited for
         executor.close(cancel=bool(outcome.report.get("interrupted")))
     report = outcome.report
+    if notes:
+        report["data_notes"] = notes
     report["command"] = {"data": list(data), "diagram": chart, "validate": list(validation),
                          "effects_file": effects_file, "output": output, "map": dict(maps)}
     report_text = json.dumps(strict_json(report), indent=1, allow_nan=False) + "\n"

@@ -18,14 +18,17 @@ from .options import (
     force_option,
     handle_errors,
     html_option,
+    intersample_option,
     max_iter_option,
+    read_records,
     require_figures,
     rows_option,
     seed_option,
     settings_usage,
     shooting_option,
     substeps_option,
-    windowed,
+    timebase_options,
+    with_intersample,
     with_substeps,
 )
 from .terminal import CtrlC, Progress
@@ -86,7 +89,9 @@ __all__ = ["identify"]
                  "limit is reported as not converged.", default=1000)
 @alignment_option()
 @substeps_option()
+@intersample_option()
 @data_options
+@timebase_options
 @rows_option("each training record")
 @click.option("--plots", type=click.Path(file_okay=False),
               help="Directory for the figures (PNG; created if needed, figures of the same name replaced). "
@@ -97,17 +102,17 @@ __all__ = ["identify"]
 @executor_options("the multi-start fits")
 @handle_errors
 def identify(data, chart, output, fix_from, validation, init_window, shooting, shooting_starts, threads, floor_bias, curve_start, lm_steps, lm_bounds, split, starts, seed, online, window, average,
-             max_iter, alignment, substeps, mapping, units, plots, html_path, force, quiet, workers=None,
-             scheduler=None) -> None:
+             max_iter, alignment, substeps, intersample, mapping, units, delimiter, decimal, resample, plots, html_path, force,
+             quiet, workers=None, scheduler=None) -> None:
     """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
     together, each simulated from its own initial state)."""
+    from ..api import with_data_notes
     from ..atomic import atomic_write_text, check_output_path
-    from ..data.csvdata import read_csv
+    from ..data.timebase import longest
     from ..diagram.dump import dump_diagram
     from ..diagram.validate import load_diagram
     from ..errors import SdnnError
     from ..identify.document import dumps, fix_from_result
-    from ..identify.problem import required_columns
     from ..identify.run import IdentifySettings
     from ..identify.run import identify as run_identify
     from ..identify.settings import IDENTIFY_GEODESIC
@@ -126,14 +131,14 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
         check_output_path(chart_out, inputs, force=force)
     if html_path:
         check_output_path(html_path, inputs, force=force)
-    diagram = with_substeps(load_diagram(chart), substeps)
+    diagram = with_intersample(with_substeps(load_diagram(chart), substeps), intersample)
     fixed = []
     if fix_from:
         diagram, fixed = fix_from_result(diagram, fix_from)
     maps, scales = column_reading(diagram, mapping, units)
-    cols = required_columns(diagram)
-    train = [windowed(read_csv(d, cols, maps, diagram.sample_time, scale=scales)) for d in data]
-    val = read_csv(validation, cols, maps, diagram.sample_time, scale=scales) if validation else None
+    dialect = (delimiter, decimal, resample)
+    train = read_records(data, diagram, maps, scales, *dialect)
+    val = longest(read_records([validation], diagram, maps, scales, *dialect, window=False)) if validation else None
     with settings_usage():
         settings = IdentifySettings(starts=starts, seed=seed, max_iter=max_iter, alignment=alignment, split=split,
                                     online=online, window=window, average=average, fixed_from=tuple(fixed),
@@ -156,6 +161,7 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
                                        stop=ctrl_c)
     finally:
         progress.close()
+    outcome = with_data_notes(outcome, [*train, *([val] if val is not None else [])])
     if outcome.status == "diverged_at_start":
         raise SdnnError.at("FIT001", outcome.message, chart,
                            hint="the start values make the model unstable on this data: change 'init'")

@@ -20,7 +20,8 @@ from ..errors import SdnnError
 
 __all__ = ["fail", "handle_errors", "settings_usage", "executor_options", "force_option", "seed_option",
            "map_option", "unit_option", "data_options", "column_reading", "rows_option", "windowed", "alignment_option", "max_iter_option",
-           "substeps_option", "with_substeps", "ALIGNMENT_HELP", "html_option", "require_figures"]
+           "substeps_option", "with_substeps", "timebase_options", "read_records", "intersample_option",
+           "with_intersample", "ALIGNMENT_HELP", "html_option", "require_figures"]
 
 ALIGNMENT_HELP = "zoh: input sample k acts on [t_k, t_k+1) (logged data); direct: output k uses input k."
 
@@ -158,6 +159,42 @@ def column_reading(diagram, mapping, units) -> tuple[dict[str, str], dict[str, f
 
 
 
+_DELIMITER_CHOICES = {"auto": "auto", ",": ",", ";": ";", "tab": "\t", "|": "|"}
+
+
+def timebase_options(func):
+    """``--delimiter``, ``--decimal`` and ``--resample``: how a command reads its CSV files' dialect and time
+    base (see data.timebase and docs/data_and_time.md)."""
+    func = click.option("--resample", is_flag=True,
+                        help="Resample records logged at another rate than the chart's sample time to it "
+                             "(scipy.signal.resample_poly; a note says so). Without it such a record is refused.")(func)
+    func = click.option("--decimal", type=click.Choice([".", ",", "auto"]), default="auto", show_default=True,
+                        help="Decimal mark of the CSV files; auto: a comma where the delimiter is not one and the "
+                             "first data row is written so (a note says so).")(func)
+    return click.option("--delimiter", type=click.Choice(list(_DELIMITER_CHOICES)), default="auto",
+                        show_default=True,
+                        help="Field delimiter of the CSV files; auto: the one that splits the header into the most "
+                             "fields (a note says when it is not ',').")(func)
+
+
+def read_records(paths, diagram, maps, scales, delimiter: str, decimal: str, resample: bool,
+                 window: bool = True) -> list:
+    """The records of the CSV files `paths` on the chart's time base (data.timebase.conform: jitter snapped,
+    gaps split, with --resample another rate resampled), each cut to --rows first when `window`."""
+    from ..data.csvdata import read_csv
+    from ..data.timebase import conform
+    from ..identify.problem import required_columns
+
+    cols = required_columns(diagram)
+    out = []
+    for path in paths:
+        with settings_usage():  # a decimal comma with a comma delimiter: a usage error naming the options
+            data = read_csv(path, cols, maps, None, scale=scales, delimiter=_DELIMITER_CHOICES[delimiter],
+                            decimal=decimal, check_steps=False)
+        out += conform(windowed(data) if window else data, diagram.sample_time, resample)
+    return out
+
+
 def _parse_rows(ctx, param, value):
     """``FROM:TO`` -> a slice of data rows (0-based, TO excluded, either end may be left out), kept in the
     context for :func:`windowed`; a malformed value is a usage error."""
@@ -263,6 +300,44 @@ def with_substeps(diagram, substeps):
     from dataclasses import replace
 
     return replace(diagram, substeps=substeps)
+
+
+def _check_intersample(ctx, param, value):
+    out = {}
+    for item in value:
+        name, equals, mode = (part.strip() for part in str(item).partition("="))
+        if not equals or not name or mode not in ("hold", "linear"):
+            raise click.BadParameter(f"{item!r} is not NAME=hold or NAME=linear", ctx=ctx, param=param)
+        out[name] = mode
+    return out
+
+
+def intersample_option():
+    """``--intersample NAME=linear`` (repeatable): what chart input NAME does between its samples, overriding the
+    chart's `intersample` (see network.inputsignal)."""
+    return click.option("--intersample", "intersample", multiple=True, metavar="NAME=hold|linear",
+                        callback=_check_intersample,
+                        help="Chart input NAME between its samples: hold (each sample acts until the next: a held "
+                             "command, the default) or linear (straight between the samples: a smooth measured "
+                             "signal); overrides the chart's inputs.NAME.intersample (repeatable).")
+
+
+def with_intersample(diagram, intersample: Mapping[str, str]):
+    """The chart with the command line's --intersample applied (a usage error naming an unknown input)."""
+    if not intersample:
+        return diagram
+    from dataclasses import replace
+
+    from ..errors import did_you_mean
+
+    names = [s.name for s in diagram.inputs]
+    for name in intersample:
+        if name not in names:
+            hint = did_you_mean(name, names)
+            raise click.BadParameter(f"'{name}' is not an input of the chart (inputs: {', '.join(names)})"
+                                     + (f"; {hint}" if hint else ""), param_hint="'--intersample'")
+    inputs = tuple(replace(s, intersample=intersample.get(s.name, s.intersample)) for s in diagram.inputs)
+    return replace(diagram, inputs=inputs)
 
 
 def html_option():

@@ -92,7 +92,7 @@ def emit_network(diagram: Diagram, chart: DiscreteChart, loops: LoopReport, seed
     net = Network(
         name=diagram.name,
         sample_time=diagram.sample_time,
-        inputs=tuple(InputSpec(s.name, s.unit) for s in diagram.inputs),
+        inputs=tuple(InputSpec(s.name, s.unit, s.intersample, s.delay) for s in diagram.inputs),
         layers=tuple(layers),
         weights=tuple(weights),
         outputs=outputs,

@@ -63,6 +63,7 @@ import hashlib
 import io
 import math
 import os
+import re
 import stat
 from array import array
 from collections.abc import Callable, Iterator, Mapping, Sequence
@@ -77,7 +78,7 @@ from flowchart2sdnn.expr import ExprError
 
 from .columns import EXAMPLE, column_scale
 
-__all__ = ["TIME_COLUMNS", "Dataset", "read_csv", "parse_mapping", "write_csv"]
+__all__ = ["TIME_COLUMNS", "Dataset", "read_csv", "parse_mapping", "sniff_dialect", "write_csv"]
 
 TIME_COLUMNS = ("time", "t", "time_s")
 _OTHER_DELIMITERS = {";": "';'", "\t": "tab", "|": "'|'"}
@@ -110,6 +111,16 @@ class Dataset:
     scales : dict of str to float
         Requested name (or ``"time"``) -> the factor its column was multiplied by (a column expression of the
         mapping times a ``scale``); names read as logged are absent.
+    notes : tuple of str
+        What was done to the data on the way in (a detected delimiter, snapped timestamps, a split at a gap,
+        a resampling): each one line, shown with the run's output (see :mod:`.timebase`).
+    time_column : str or None
+        The header of the time column.
+    lines : (rows, lines) or None
+        Where the file's line numbering jumps (blank lines, multi-line fields): data row ``rows[i]`` is on line
+        ``lines[i]``; None for records not read from a file.
+    row0 : int
+        The file's data row of this record's row 0 (a slice starts later).
     """
 
     path: str
@@ -121,6 +132,19 @@ class Dataset:
     sha256: str
     source_columns: dict[str, str]
     scales: dict[str, float] = dataclasses.field(default_factory=dict)
+    notes: tuple[str, ...] = ()
+    time_column: str | None = None
+    lines: tuple[tuple[int, ...], tuple[int, ...]] | None = None
+    row0: int = 0
+
+    def line_of(self, row: int) -> int | None:
+        """The file line of this record's data row `row` (None when not read from a file)."""
+        if self.lines is None:
+            return None
+        rows, lines = self.lines
+        row += self.row0
+        at = bisect.bisect_right(rows, row) - 1
+        return lines[at] + row - rows[at]
 
     def slice(self, start: int | None, stop: int | None) -> Dataset:
         """Rows ``start:stop`` (Python slice rules) as a new Dataset sharing the read-only arrays."""
@@ -135,6 +159,7 @@ class Dataset:
             time=time,
             n_rows=len(range(*rows.indices(self.n_rows))),
             max_step_deviation=deviation,
+            row0=self.row0 + rows.indices(self.n_rows)[0],
         )
 
 
@@ -320,18 +345,21 @@ def _is_expression(target: str) -> bool:
 
 def _resolve(
     file: str, header: list[str], line: int, required: Sequence[str], mapping: Mapping[str, str],
-    factors: dict[str, float],
+    factors: dict[str, float], delimiter: str = ",",
 ) -> tuple[dict[str, int], int | None, dict[str, str]]:
     """Column index per required name, the time column's index, and the header each name reads; the factor
     of every column expression is put into `factors`."""
-    if len(header) == 1:
+    if len(header) == 1 and delimiter == ",":
         found = [label for sep, label in _OTHER_DELIMITERS.items() if sep in header[0]]
         if not found and len(header[0].split()) > 1:
             found = ["blanks"]
         wanted = {mapping.get(name, name) for name in required}
         if found and wanted != {header[0]}:
+            sep = next((s for s, label in _OTHER_DELIMITERS.items() if label == found[0]), None)
+            hint = (f"give the delimiter (--delimiter '{sep}'), let it be detected (--delimiter auto), or "
+                    "save the file with ',' as delimiter" if sep else "save the file with ',' as delimiter")
             raise _fail("CSV014", f"the header is one field {_shown(header[0])}: expected comma-separated "
-                        f"columns, found {found[0]}", file, line, hint="save the file with ',' as delimiter")
+                        f"columns, found {found[0]}", file, line, hint=hint)
     if all(_is_number(h) for h in header):
         raise _fail("CSV023", f"no header row: line {line} holds numbers (expected column names such as "
                     f"{', '.join(repr(n) for n in required[:3])})", file, line)
@@ -389,8 +417,9 @@ def _resolve(
 class _Rows:
     """Streaming state: one buffer per kept field, and the file line of every data row."""
 
-    def __init__(self, file: str, header: list[str], fields: list[int], first_line: int):
+    def __init__(self, file: str, header: list[str], fields: list[int], first_line: int, decimal: str = "."):
         self.file = file
+        self.comma = decimal == ","
         self.header = header
         self.fields = sorted(fields)
         self.buffers = [array("d") for _ in self.fields]
@@ -429,6 +458,11 @@ class _Rows:
                 base = start - n
             for buffer, field in pairs:
                 cell = row[field]
+                if self.comma:
+                    if "." in cell:  # a thousands separator or a point: either way not this file's numbers
+                        self.n = n
+                        raise self.bad_cell(cell, field, start)
+                    cell = cell.replace(",", ".")
                 if not cell.isascii() or "_" in cell:
                     self.n = n
                     raise self.bad_cell(cell, field, start)
@@ -476,8 +510,9 @@ class _Rows:
         if not cell.strip():
             return _fail("CSV006", f"{self.column_name(field)}: the cell is empty (expected a decimal number)",
                          self.file, line)
-        return _fail("CSV004", f"{self.column_name(field)}: {_shown(cell)} is not a number "
-                     "(expected a decimal number)", self.file, line)
+        expected = "a decimal number with a decimal comma" if self.comma else "a decimal number"
+        return _fail("CSV004", f"{self.column_name(field)}: {_shown(cell)} is not a number (expected {expected})",
+                     self.file, line)
 
     def arrays(self) -> dict[int, np.ndarray]:
         out = {}
@@ -527,6 +562,9 @@ def read_csv(
     max_bytes: int = 2_000_000_000,
     jitter_tolerance: float = 0.01,
     scale: Mapping[str, float] | None = None,
+    delimiter: str = ",",
+    decimal: str = ".",
+    check_steps: bool = True,
 ) -> Dataset:
     """Read the columns a chart needs from a CSV file, checking everything a user could get wrong.
 
@@ -552,6 +590,16 @@ def read_csv(
     scale : mapping of str to float, optional
         ``scale[name]`` multiplies the column read for ``name`` (or the time column, ``"time"``), e.g. a unit
         conversion (see :func:`flowchart2sdnn.analysis.dataunits.unit_scales`).
+    delimiter : str
+        The field separator: ``","``, ``";"``, a tab or ``"|"``; ``"auto"`` reads it off the header (the
+        separator that splits it into the most fields, ``","`` on a tie) and says so in ``notes`` when it is
+        not a comma.
+    decimal : str
+        ``"."`` or ``","`` (a decimal comma, with another delimiter); ``"auto"``: a comma where the delimiter
+        is not one and the first data row holds numbers written with a comma (said in ``notes``).
+    check_steps : bool
+        Check the time steps against ``sample_time`` (or their median) within ``jitter_tolerance``; False
+        checks only that time increases (:func:`flowchart2sdnn.data.timebase.conform` does the rest).
 
     Returns
     -------
@@ -577,9 +625,10 @@ def read_csv(
     if _check_file(file, max_bytes) == 0:
         raise _fail("CSV007", "the file is empty (expected a header row naming the columns)", file)
     _sniff_binary(file)
+    delimiter, decimal, notes = sniff_dialect(file, delimiter, decimal)
     try:
         with _hashing_text_reader(file) as (text, digest):
-            reader = csv.reader(text, strict=True)
+            reader = csv.reader(text, strict=True, delimiter=delimiter)
             header, line = None, 0
             for record in reader:
                 start, line = line + 1, reader.line_num
@@ -588,9 +637,10 @@ def read_csv(
                     break
             if header is None:
                 raise _fail("CSV007", "the file holds no header row (expected column names)", file)
-            index, time_field, sources = _resolve(file, header, start, required, mapping, factors)
+            index, time_field, sources = _resolve(file, header, start, required, mapping, factors,
+                                                  delimiter)
             fields = {*index.values(), *([time_field] if time_field is not None else [])}
-            rows = _Rows(file, header, list(fields), start + 1)
+            rows = _Rows(file, header, list(fields), start + 1, decimal)
             rows.read(reader, line)
             sha256 = digest()
     except csv.Error as exc:  # in the header: rows.read reports its own
@@ -620,8 +670,10 @@ def read_csv(
         else:
             columns[name] = _scaled(rows, columns[name], factor, index[name])
     deviation = None
-    if time is not None:
+    if time is not None and check_steps:
         sample_time, deviation = _check_time(rows, time, time_field, sample_time, jitter_tolerance)
+    elif time is not None:
+        sample_time = float(np.median(np.diff(time))) if len(time) > 1 else sample_time
     return Dataset(
         path=file,
         columns=columns,
@@ -632,7 +684,55 @@ def read_csv(
         sha256=sha256,
         source_columns=sources,
         scales={name: f for name, f in factors.items() if f != 1.0},
+        notes=tuple(notes),
+        time_column=header[time_field] if time_field is not None else None,
+        lines=(tuple(rows.breaks_row), tuple(rows.breaks_line)),
     )
+
+
+_DELIMITERS = {",": "','", ";": "';'", "\t": "tab", "|": "'|'"}
+_COMMA_NUMBER = re.compile(r"^\s*[-+]?\d*,\d+([eE][-+]?\d+)?\s*$")
+
+
+def sniff_dialect(file: str, delimiter: str, decimal: str) -> tuple[str, str, list[str]]:
+    """The delimiter and decimal mark to read `file` with, detected where "auto", and the notes saying so."""
+    if delimiter != "auto" and delimiter not in _DELIMITERS:
+        raise ValueError(f"delimiter must be one of ',', ';', tab, '|' or 'auto', not {delimiter!r}")
+    if decimal not in (".", ",", "auto"):
+        raise ValueError(f"decimal must be '.', ',' or 'auto', not {decimal!r}")
+    if delimiter == "," and decimal == ",":
+        raise ValueError("decimal ',' needs a delimiter other than ',' (e.g. delimiter ';')")
+    if delimiter != "auto" and decimal != "auto":
+        return delimiter, decimal, []
+    head = _first_lines(file, 2)
+    notes = []
+    if delimiter == "auto":
+        counts = {sep: len(next(csv.reader([head[0]], delimiter=sep), [])) for sep in _DELIMITERS} if head else {}
+        delimiter = max(counts, key=lambda sep: (counts[sep], sep == ","), default=",")
+        if delimiter != ",":
+            notes.append(f"delimiter {_DELIMITERS[delimiter]} (detected from the header; --delimiter to set it)")
+    if decimal == "auto":
+        cells = next(csv.reader([head[1]], delimiter=delimiter), []) if len(head) > 1 else []
+        decimal = "," if delimiter != "," and any(_COMMA_NUMBER.match(c) for c in cells) else "."
+        if decimal == ",":
+            notes.append("decimal comma (detected from the first data row; --decimal to set it)")
+    return delimiter, decimal, notes
+
+
+def _first_lines(file: str, n: int) -> list[str]:
+    """The first `n` non-blank lines of `file` (fewer at its end; none when it cannot be read as UTF-8: the
+    reader reports that)."""
+    out: list[str] = []
+    try:
+        with open(file, encoding="utf-8-sig", newline="") as handle:
+            for line in handle:
+                if line.strip():
+                    out.append(line.rstrip("\r\n"))
+                    if len(out) == n:
+                        break
+    except (OSError, UnicodeDecodeError):
+        return []
+    return out
 
 
 def _scaled(rows: _Rows, values: np.ndarray, factor: float, field: int) -> np.ndarray:

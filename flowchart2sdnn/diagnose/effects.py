@@ -22,7 +22,7 @@ damping        speed, speed diff.  viscous gain with a new parameter (0) in the 
 (coulomb)      speed               Fc*sign_smooth(w) + c + dFv*max(w, 0), new parameters at 0: asymmetric
                                    Coulomb and viscous friction with physical parameters (an option of
                                    friction; not in the registry on its own)
-dead_time      input               a delay of n samples in front of every consumer of the input
+dead_time      input               a dead time tau (s) on the input: n samples scanned, tau fitted within n -+ 1/2
 saturation     input               L*sat((u - o)/L) + o: a hard clip at o -/+ L, L scanned in the data range
 sensor_limit   output              the same clip on a measured output (a sensor or its converter at its range);
                                    the chart's block is renamed, the output reads the clipped signal (an
@@ -332,15 +332,20 @@ class Damping:
 
 @dataclass(frozen=True)
 class DeadTime:
-    """A pure delay of n samples on an input; n is scanned over ``1..max_samples``."""
+    """A dead time on an input: its `delay`, a new parameter tau in seconds started at n samples (n scanned
+    over ``1..max_samples``) and fitted within half a sample of n (from 0 for n = 1): the scan decides the
+    whole samples, the refit the fraction (network.inputsignal: the step means of the delayed input, exact in
+    tau). Bounded so, the options stay apart: free, every refit went to the same tau and the option reported
+    was whichever start happened to end lowest."""
 
     max_samples: int = 20
     name: str = "dead_time"
     neutral: bool = False
-    extra_dof: int = 1  # n is estimated too (by the scan)
+    extra_dof: int = 1  # n is estimated too (by the scan); tau is held at n samples while scored (screened)
 
     def places(self, diagram: Diagram) -> tuple[Place, ...]:
-        return input_places(diagram)
+        delayed = {s.name for s in diagram.inputs if s.delay is not None}
+        return tuple(p for p in input_places(diagram) if p.at not in delayed)
 
     def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
         return tuple(range(1, self.max_samples + 1))
@@ -349,12 +354,22 @@ class DeadTime:
         n = int(option) if option is not None else 1
         if n < 1:
             raise ValueError(f"dead_time needs n >= 1 samples, got {n}")
-        name = fresh_name(diagram, f"dead_{place.at}")
-        block = Block(name, "delay", (Term(place.at),), n=n, description=f"dead time of {place.at} (diagnose)")
-        return reroute(add_blocks(diagram, [block]), place.at, name, keep={name})
+        pname = fresh_name(diagram, f"tau_{place.at}")
+        T = diagram.sample_time
+        p = Parameter(pname, n * T, unit="s", min=0.0 if n == 1 else (n - 0.5) * T, max=(n + 0.5) * T,
+                      description=f"dead time of {place.at} (diagnose)")
+        inputs = tuple(replace(s, delay=pname) if s.name == place.at else s for s in diagram.inputs)
+        return add_blocks(replace(diagram, inputs=inputs), [], [p])
+
+    def screened(self, diagram: Diagram) -> Diagram:
+        """The patched chart as the score test sees it: tau held at its n samples (the scan ranks whole n)."""
+        held = {s.delay for s in diagram.inputs if s.delay is not None}
+        return replace(diagram, parameters=tuple(replace(p, fixed=True) if p.name in held and
+                                                 p.description and "(diagnose)" in p.description else p
+                                                 for p in diagram.parameters))
 
     def describe(self) -> str:
-        return f"dead_time: a delay of n = 1..{self.max_samples} samples on an input"
+        return f"dead_time: a dead time on an input, n = 1..{self.max_samples} samples and the fraction fitted"
 
     def label(self, option) -> str:
         return f"n={int(option)}"

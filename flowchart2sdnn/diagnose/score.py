@@ -56,7 +56,7 @@ from ..strictjson import finite_or_none
 from .effects import Effect
 from .graph import Place
 
-__all__ = ["RCOND", "Candidate", "Baseline", "Score", "Screen", "gauss_newton_decrease", "new_quantities",
+__all__ = ["RCOND", "Candidate", "Baseline", "Score", "Screen", "gauss_newton_decrease", "new_quantities", "screened",
            "screen"]
 
 RCOND = 1e-12
@@ -292,6 +292,14 @@ def _error(c: Candidate, text: str) -> Score:
     return Score(c, math.nan, math.nan, None, error=text)
 
 
+def screened(c: Candidate) -> Diagram:
+    """The chart a candidate is scored on: its own, or the effect's `screened(diagram)` where the effect scores
+    a scanned choice with a quantity held (a dead time's tau at its n samples: free, the tau column made every
+    n predict the same optimum, and the scan lost its ranking)."""
+    hold = getattr(c.effect, "screened", None)
+    return c.diagram if hold is None else hold(c.diagram)
+
+
 def _build(diagram: Diagram, train: Sequence[Dataset], alignment: str, seed: int) -> Problem:
     return build_problem(diagram, train[0], alignment, seed, more=tuple(train[1:]))
 
@@ -345,7 +353,7 @@ def _score_one(c: Candidate, base: Baseline, train: Sequence[Dataset], alignment
                problem: Problem | None = None) -> Score:
     if problem is None:
         try:
-            problem = _build(c.diagram, train, alignment, seed)
+            problem = _build(screened(c), train, alignment, seed)
         except (SdnnError, ValueError, KeyError) as exc:
             return _error(c, _message(exc))
     out = _fun(problem)
@@ -407,7 +415,7 @@ def screen(candidates: Sequence[Candidate], problem: Problem, train: Sequence[Da
             progress(f"scan {c.title()}", (i + 1) / max(1, len(others)))
         p = None
         try:
-            p = _build(c.diagram, train, alignment, seed)
+            p = _build(screened(c), train, alignment, seed)
             e = p.residual(p.compiled.theta0())
             passes["simulation"] += 1
             cost, err = (0.5 * float(e @ e), None) if e is not None else (None, "diverges")

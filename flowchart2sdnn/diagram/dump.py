@@ -83,6 +83,10 @@ def dump_diagram(diagram: Diagram, identified: Mapping | None = None) -> str:
                 spec["unit"] = s.unit
             if s.description:
                 spec["description"] = s.description
+            if s.intersample != "hold":
+                spec["intersample"] = s.intersample
+            if s.delay is not None:
+                spec["delay"] = s.delay if not _is_number_text(s.delay) else _yaml_number(float(s.delay))
             out[s.name] = spec
         return out
 
@@ -130,3 +134,11 @@ def with_values(diagram: Diagram, parameters: Mapping[str, float], nonlinear: Ma
                         fixed=bool(b.fixed or fix))
         blocks.append(b)
     return replace(diagram, parameters=tuple(params), blocks=tuple(blocks))
+
+
+def _is_number_text(text: str) -> bool:
+    try:
+        float(text)
+    except ValueError:
+        return False
+    return True

@@ -54,6 +54,15 @@ class Signal:
     unit: str | None = None
     description: str | None = None
     location: Location | None = None
+    #: inputs only: "hold" (zero-order, each sample acts until the next) or "linear" (first-order hold:
+    #: straight between the samples), MATLAB iddata's InterSample zoh / foh
+    intersample: str = "hold"
+    #: inputs only: a dead time in seconds, a parameter name (fitted) or a number; None: none
+    delay: str | None = None
+
+
+#: the intersample behaviours of an input (Signal.intersample)
+INTERSAMPLE = ("hold", "linear")
 
 
 @dataclass(frozen=True)

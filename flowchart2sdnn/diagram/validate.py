@@ -22,6 +22,7 @@ from .model import (
     DELAY_RULES,
     FORMAT_VERSION,
     FUNCTIONS,
+    INTERSAMPLE,
     MAX_SUBSTEPS,
     RESERVED,
     Block,
@@ -43,6 +44,7 @@ MAX_DELAY = 100_000
 TOP_KEYS = ("sdnn", "name", "description", "sample_time", "substeps", "delays", "inputs", "outputs", "parameters",
             "blocks", "identified")
 SIGNAL_KEYS = ("unit", "description")
+INPUT_KEYS = (*SIGNAL_KEYS, "intersample", "delay")
 PARAM_KEYS = ("init", "unit", "min", "max", "fixed", "description", "per_record")
 COMMON_BLOCK_KEYS = ("type", "unit", "description")
 BLOCK_KEYS: dict[str, tuple[str, ...]] = {
@@ -169,6 +171,7 @@ class _Validator:
             self.error("CHART002", "missing 'inputs' (the measured excitation signals)", ())
         if "outputs" not in data:
             self.error("CHART002", "missing 'outputs' (the measured signals to fit)", ())
+        self.param_names = pnames
         self.references(inputs, outputs, blocks)
         if any(d.severity == "error" for d in self.diagnostics):
             return None
@@ -227,11 +230,32 @@ class _Validator:
             if not isinstance(spec, dict):
                 self.error("CHART004", f"signal '{name}' must be a mapping like {{unit: N*m}}, found {_kind(spec)}", path)
                 continue
-            self.unknown_keys(spec, SIGNAL_KEYS, path, f"signal '{name}'")
+            self.unknown_keys(spec, INPUT_KEYS if key == "inputs" else SIGNAL_KEYS, path, f"signal '{name}'")
             unit = self.optional_str(spec, "unit", path)
             desc = self.optional_str(spec, "description", path)
-            out.append(Signal(name, unit, desc, self.loc(*path)))
+            intersample, delay = self.input_timing(spec, path) if key == "inputs" else ("hold", None)
+            out.append(Signal(name, unit, desc, self.loc(*path), intersample, delay))
         return out
+
+    def input_timing(self, spec: Mapping, path: tuple) -> tuple[str, str | None]:
+        """An input's `intersample` (hold | linear) and `delay` (seconds: a parameter name or a number); the
+        name is checked against the parameters in :meth:`references`."""
+        intersample = spec.get("intersample", "hold")
+        if intersample not in INTERSAMPLE:
+            self.error("CHART004", f"'intersample' must be one of {', '.join(INTERSAMPLE)}, found {_show(intersample)}",
+                       path + ("intersample",), hint="hold: each sample acts until the next (a drive's torque "
+                       "command); linear: straight between the samples (a smooth measured signal)")
+            intersample = "hold"
+        delay = spec.get("delay")
+        if delay is None:
+            return intersample, None
+        if _is_number(delay) and _finite_number(delay):
+            return intersample, repr(float(delay))
+        if isinstance(delay, str) and NAME_RE.match(delay.strip()):
+            return intersample, delay.strip()
+        self.error("CHART004", f"'delay' must be a dead time in seconds: a parameter name or a number, found "
+                   f"{_show(delay)}", path + ("delay",), hint="e.g. delay: tau, with tau a parameter (unit s)")
+        return intersample, None
 
     def optional_str(self, spec: Mapping, key: str, path: tuple, block=None) -> str | None:
         value = spec.get(key)
@@ -547,6 +571,11 @@ class _Validator:
                     ipath = ("blocks", b.name, "in", i) if len(b.inputs) > 1 else ("blocks", b.name, "in")
                     self.error("CHART009", f"undefined signal '{t.signal}' (not an input nor a block)", ipath,
                                b.name, did_you_mean(t.signal, known))
+        pnames = set(getattr(self, "param_names", ()))
+        for s in inputs:
+            if s.delay is not None and NAME_RE.match(s.delay) and s.delay not in pnames:
+                self.error("CHART009", f"input '{s.name}': delay '{s.delay}' is not a parameter of the chart",
+                           ("inputs", s.name, "delay"), hint=did_you_mean(s.delay, sorted(pnames)))
         for s in outputs:
             if s.name in input_names:
                 self.error("CHART010", f"output '{s.name}' is a chart input; outputs must be block signals",

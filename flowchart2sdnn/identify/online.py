@@ -33,6 +33,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..errors import SdnnError
 from ..fit.damping import TRAINLM_MU0
 from ..fit.transforms import Bounds
 from ..network.runtime import CompiledNetwork
@@ -258,7 +259,13 @@ class OnlineRun:
         # sub-steps: the kernel reads one input row per network step, each sample held over its N steps (the
         # zero-order hold of Runtime.simulate); N = 1 passes the record itself
         n_sub = compiled.substeps
-        self.step_inputs = self.inputs if n_sub == 1 else np.repeat(self.inputs, n_sub, axis=0)
+        if compiled.fitted_delays:
+            raise SdnnError.at("FIT007", "quasi-online identification cannot fit an input's dead time (its "
+                               "sensitivity enters through the input, which the window kernel does not carry)",
+                               compiled.net.name, hint="identify offline, or give the delay as a number")
+        # a linear or delayed input: each step's mean over it (network.inputsignal), as the offline kernels see it
+        self.step_inputs = compiled.step_inputs(self.inputs) if compiled.shaped_inputs else \
+            self.inputs if n_sub == 1 else np.repeat(self.inputs, n_sub, axis=0)
         self.targets = _checked(targets, "targets", compiled.output_names, self.n_samples)
         names = compiled.names
         x0 = compiled.theta0() if theta0 is None else np.array(theta0, dtype=float).reshape(-1)

@@ -227,7 +227,12 @@ def build_problem(diagram: Diagram, data: Dataset, alignment: str = "zoh", seed:
 
         diagram, _ = with_spans(diagram, (data, *more), alignment)
         network = compile_diagram(diagram, seed=seed).network
-    first = _one_problem(diagram, network, CompiledNetwork(network), data, alignment)
+    compiled = CompiledNetwork(network)
+    if alignment != "zoh" and compiled.shaped_inputs:
+        raise SdnnError.at("DATA006", f"inputs with `intersample: linear` or a `delay` need the zoh alignment (a "
+                           f"sample acts from its time on), not {alignment!r}", diagram.file,
+                           hint="drop --alignment direct")
+    first = _one_problem(diagram, network, compiled, data, alignment)
     extra = tuple(Segment(p.inputs, p.targets, p.init)
                   for p in (_one_problem(diagram, network, first.compiled, d, alignment) for d in more))
     if not extra:

@@ -34,7 +34,10 @@ def explain_network(net: Network) -> str:
             transfers = "netprod (n = product of the weighted inputs), " + transfers
         lines.append(f"  {m + 1:>3}  {la.name:<14} {la.kind or '':<11} {la.size} neuron(s)  {transfers}")
     lines += ["", "inputs:"]
-    lines += [f"  p{i + 1} = {s.name}" + (f" [{s.unit}]" if s.unit else "") for i, s in enumerate(net.inputs)]
+    lines += [f"  p{i + 1} = {s.name}" + (f" [{s.unit}]" if s.unit else "")
+              + (", linear between samples" if s.intersample == "linear" else "")
+              + (f", delayed by {s.delay} s (each step its mean over the step)" if s.delay is not None else "")
+              for i, s in enumerate(net.inputs)]
     lines += ["", "weights (value = coefficient x learned weight; chart path in brackets):"]
     for j, w in enumerate(net.weights):
         rhs = w.coef if w.free is None else (w.free if w.coef == "1" else f"({w.coef}) * {w.free}")

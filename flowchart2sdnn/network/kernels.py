@@ -130,7 +130,7 @@ def _product_value(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_val, conn_d
 
 @numba.njit(cache=True, inline="always")
 def _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, a_buf,
-                  s_buf, slot_of, dn, hist_sens=False):
+                  s_buf, slot_of, dn, hist_sens=False, in_theta=None, in_dval=None):
     """Net input of the product neuron k and its sensitivity (from the sensitivities `s_buf`) into `dn`, by the
     product rule one factor at a time: with P the product so far and dP its derivative, a factor f = w x gives
     d(P f) = dP f + P df, df = w S_src(t - d) + x dw/dtheta. Exact with zero factors (no division). Returns n."""
@@ -150,6 +150,8 @@ def _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_
         f = w * x
         for p in range(dn.shape[0]):
             dn[p] *= f
+        if in_theta is not None and kind == 1 and in_theta[conn_src[c]] >= 0:  # an input with a fitted delay
+            dn[in_theta[conn_src[c]]] += n * w * in_dval[max(t - d, 0), conn_src[c]]
         # before t = 0 the source is history, whose sensitivity is zero unless given (hist_sens)
         if kind == 0 and (t - d >= 0 or hist_sens):
             src_slot = slot_of[d]
@@ -204,7 +206,7 @@ def simulate_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val
 
 @numba.njit(cache=True, inline="always")
 def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
-              a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2, hist_sens=False):
+              a_buf, s_buf, s_blk, with_blk, slot_of, dn, dn2, hist_sens=False, in_theta=None, in_dval=None):
     """:func:`simulate_step` and the RTRL recursion of the module docstring: ``S(t)`` into slot ``t % ring``
     of `s_buf` (ring, N, n_pad).
 
@@ -214,6 +216,9 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
     and `dn2` are not touched. `slot_of` (ring,) int64, `dn` and `dn2` (n_pad,) float64 are scratch.
     With `hist_sens` the slots of `s_buf` before t = 0 hold the history's own sensitivities (free initial states:
     identify.shooting) and are read like any other; otherwise they are skipped as zero (`s_blk` always is).
+    `in_theta` (n_inputs,) int64 and `in_dval` (steps, n_inputs) float64, optional: input i depends on theta
+    ``in_theta[i]`` (-1: on none) with derivative ``in_dval[t, i]`` at step t (a fitted dead time,
+    network.inputsignal).
     """
     ring = a_buf.shape[0]
     slot = _slots(t, ring, slot_of)
@@ -225,10 +230,11 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
     for k in range(transfer.shape[0]):
         if transfer[k] == PRODUCT:  # linear transfer: S = dn
             a_buf[slot, k] = _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr,
-                                           dtheta, dval, a_buf, s_buf, slot_of, s_buf[slot, k], hist_sens)
+                                           dtheta, dval, a_buf, s_buf, slot_of, s_buf[slot, k], hist_sens, in_theta,
+                                           in_dval)
             if with_blk:
                 _product_rtrl(t, k, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval,
-                              a_buf, s_blk, slot_of, s_blk[slot, k])
+                              a_buf, s_blk, slot_of, s_blk[slot, k], False, in_theta, in_dval)
             continue
         n = 0.0
         for c in range(conn_ptr[ix(k)], conn_ptr[ix(k + 1)]):
@@ -246,6 +252,11 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
                     axpy(dn2, w, s_blk[src_slot, src])
             elif kind == 1:
                 x = inputs[ix(max(t - d, 0)), ix(conn_src[ix(c)])]
+                if in_theta is not None and in_theta[ix(conn_src[ix(c)])] >= 0:  # an input with a fitted delay
+                    dx = w * in_dval[ix(max(t - d, 0)), ix(conn_src[ix(c)])]
+                    dn[ix(in_theta[ix(conn_src[ix(c)])])] += dx
+                    if with_blk:
+                        dn2[ix(in_theta[ix(conn_src[ix(c)])])] += dx
             else:
                 x = 1.0
             n += w * x
@@ -310,6 +321,8 @@ def jacobian_kernel(
     n_theta,
     stride=1,
     s_init=None,
+    in_theta=None,
+    in_dval=None,
 ):
     """Outputs and their exact derivatives by RTRL, kept at every `stride`-th step as in :func:`simulate_kernel`.
 
@@ -317,6 +330,7 @@ def jacobian_kernel(
     entries ``dptr[c]:dptr[c + 1]`` of ``dtheta`` (theta index, int64) and ``dval`` (value, float64) -- and
     ``n_theta`` = P. `s_init` (N, P) float64, optional: d history / d theta, for theta that include initial
     states (multiple shooting's free segment starts); None: the history does not depend on theta.
+    `in_theta`, `in_dval`: inputs that depend on theta (see :func:`rtrl_step`; None: none does).
 
     Returns
     -------
@@ -344,7 +358,7 @@ def jacobian_kernel(
     slot_of = np.empty(ring, dtype=np.int64)
     for t in range(n_steps):
         rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval, transfer,
-                  a_buf, s_buf, s_buf, False, slot_of, dn, dn, hist_sens)
+                  a_buf, s_buf, s_buf, False, slot_of, dn, dn, hist_sens, in_theta, in_dval)
         if (t + 1) % stride != 0:
             continue
         slot = ix(t % ring)
@@ -382,7 +396,7 @@ def simulate_pieces_kernel(
 @numba.njit(cache=True, fastmath=_FAST, nogil=True)
 def jacobian_pieces_kernel(
     inputs, first, last, histories, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dptr, dtheta, dval,
-    transfer, ring, record, n_theta, stride, s_init
+    transfer, ring, record, n_theta, stride, s_init, in_theta=None, in_dval=None
 ):
     """:func:`jacobian_kernel` on the pieces of :func:`simulate_pieces_kernel`, each from ``histories[i]`` with
     the history's sensitivities `s_init`; outputs and sensitivities stacked."""
@@ -395,7 +409,8 @@ def jacobian_pieces_kernel(
     for i in range(first.shape[0]):
         y, dy = jacobian_kernel(inputs[first[i] * stride:last[i] * stride], conn_ptr, conn_kind, conn_src,
                                 conn_delay, conn_val, dptr, dtheta, dval, transfer, histories[i], ring, record,
-                                n_theta, stride, s_init)
+                                n_theta, stride, s_init, in_theta,
+                                None if in_dval is None else in_dval[first[i] * stride:last[i] * stride])
         y_all[row:row + y.shape[0]] = y
         dy_all[row:row + y.shape[0]] = dy
         row += y.shape[0]

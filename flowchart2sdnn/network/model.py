@@ -86,10 +86,24 @@ class LayerSpec:
 
 @dataclass(frozen=True)
 class InputSpec:
-    """Network input p^l (dimension 1: one chart input signal each)."""
+    """Network input p^l (dimension 1: one chart input signal each).
+
+    `intersample` "hold" or "linear" and `delay` (a dead time in seconds: a parameter name or a number text,
+    None for none) say what the input is between its samples; the runtime feeds each network step the input's
+    mean over the step (network.inputsignal)."""
 
     name: str
     unit: str | None = None
+    intersample: str = "hold"
+    delay: str | None = None
+
+    def to_dict(self) -> dict:
+        d = asdict(self)
+        if self.intersample == "hold":  # files of networks with held inputs stay as they were
+            del d["intersample"]
+        if self.delay is None:
+            del d["delay"]
+        return d
 
 
 @dataclass(frozen=True)
@@ -267,7 +281,7 @@ class Network:
             "sample_time": self.sample_time,
             "substeps": self.substeps,
             "step": self.step,
-            "inputs": [asdict(i) for i in self.inputs],
+            "inputs": [i.to_dict() for i in self.inputs],
             "layers": [
                 {"name": la.name, "block": la.block, "kind": la.kind, "neurons": [n.to_dict() for n in la.neurons]}
                 for la in self.layers
@@ -333,6 +347,15 @@ class Network:
             raise ValueError("sample_time must be a positive number")
         if not isinstance(self.substeps, int) or isinstance(self.substeps, bool) or self.substeps < 1:
             raise ValueError(f"substeps must be a whole number >= 1, not {self.substeps!r}")
+        params = {p.name for p in self.parameters}
+        for i in self.inputs:
+            if i.intersample not in ("hold", "linear"):
+                raise ValueError(f"input {i.name!r}: intersample must be hold or linear, not {i.intersample!r}")
+            if i.delay is not None and i.delay not in params:
+                try:
+                    float(i.delay)
+                except ValueError:
+                    raise ValueError(f"input {i.name!r}: delay {i.delay!r} is neither a parameter nor a number") from None
         nl = len(self.layers)
         free_names = {f.name for f in self.free_weights}
         for la in self.layers:

@@ -17,7 +17,10 @@ Semantics (the chart in continuous time, sample time ``T = diagram.sample_time``
   operand at ``t_0`` depends on the delay's own output without an integrator in between (a purely discrete
   loop), that value is undefined and the delay starts from 0 instead. ``n = 0`` is a sample-and-hold;
 * inputs are zero-order held: input row ``k`` acts on ``[t_k, t_{k+1})``; output row ``k`` is the chart at
-  ``t_k`` (row 0 holds the initial values);
+  ``t_k`` (row 0 holds the initial values). An input with ``intersample: linear`` runs straight from row k to
+  row k+1 instead (each RK4 stage reads it at its own time); one with a ``delay`` tau is that signal at
+  ``t - tau`` (a held one as its mean over each RK4 step, so a jump inside a step costs that step O(h^2));
+  before ``t_0`` an input is its first row;
 * every cycle must pass an integrator or a delay with ``n >= 1``; the other blocks are evaluated in a
   topological order of the graph without the edges into integrators and out of such delays.
 
@@ -139,9 +142,50 @@ def _derivative(x, dx, sig, order, integ, ti, tf, src, sgn, nl, buf, zero0):
         dx[i] = _operand(sig, src, sgn, ti[j, 2], ti[j, 3])
 
 
+@njit(cache=True, inline="always", error_model="numpy")
+def _input_at(inputs, i, pos, linear):
+    """Input i at `pos` samples after t_0: held (the row at or before it) or linear between rows; the first row
+    before t_0; past the last row, held or continued along the last two rows."""
+    q = inputs.shape[0]
+    if pos <= 0.0:
+        return inputs[0, i]
+    j = int(math.floor(pos))
+    if not linear:
+        return inputs[min(j, q - 1), i]
+    if q == 1:
+        return inputs[0, i]
+    j = min(j, q - 2)
+    r = min(pos - j, 2.0)
+    return inputs[j, i] + r * (inputs[j + 1, i] - inputs[j, i])
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _held_mean(inputs, i, a, b):
+    """The held input i's mean over [a, b] (samples, b - a <= 1): a jump inside an RK4 step costs O(h^2)."""
+    j = math.floor(b)
+    if a >= j or b <= 0.0:
+        return _input_at(inputs, i, a, False)
+    return ((j - a) * _input_at(inputs, i, a, False) + (b - j) * _input_at(inputs, i, b, False)) / (b - a)
+
+
+@njit(cache=True, inline="always", error_model="numpy")
+def _shape_inputs(sig, inputs, in_linear, in_shift, at, a, b, skip):
+    """Set the shaped inputs: linear ones at position `at` (samples), held delayed ones to their mean over the
+    RK4 step [a, b]."""
+    for i in range(in_linear.size):
+        if i == skip or (in_linear[i] == 0 and in_shift[i] == 0.0):
+            continue
+        if in_linear[i] == 1:
+            sig[i] = _input_at(inputs, i, at - in_shift[i], True)
+        elif b > a:
+            sig[i] = _held_mean(inputs, i, a - in_shift[i], b - in_shift[i])
+        else:
+            sig[i] = _input_at(inputs, i, a - in_shift[i], False)
+
+
 @njit(cache=True, error_model="numpy")
 def _run(inputs, x0, ti, tf, src, sgn, nl, order, order0, integ, delays, zero0, buf_len, substeps, h,
-         ctrl_i, ctrl_f, noise, rec):
+         ctrl_i, ctrl_f, noise, rec, in_linear, in_shift):
     """Fill `rec` (Q, n_sig); return (status, k): 0 ok, 1 non-finite signal at t_k, 2 non-finite state."""
     q, n_in = inputs.shape
     sig = np.zeros(rec.shape[1])
@@ -153,9 +197,15 @@ def _run(inputs, x0, ti, tf, src, sgn, nl, order, order0, integ, delays, zero0, 
     k4 = np.empty_like(x)
     xs = np.empty_like(x)
     relay = ctrl_f[0]
+    shaped = False
+    for i in range(n_in):
+        shaped = shaped or in_linear[i] == 1 or in_shift[i] != 0.0
+    skip = ctrl_i[1] if ctrl_i[0] == 1 else -1
     for k in range(q):
         for i in range(n_in):
             sig[i] = inputs[k, i]
+        if shaped:
+            _shape_inputs(sig, inputs, in_linear, in_shift, float(k), float(k), float(k), skip)
         for i in range(integ.size):
             sig[ti[integ[i], 0]] = x[i]
         # held delays first: their consumers may precede them in the order (no edges out of them)
@@ -194,16 +244,24 @@ def _run(inputs, x0, ti, tf, src, sgn, nl, order, order0, integ, delays, zero0, 
         if k == q - 1:
             break
         # inputs (sig[:n_in]) and delay outputs stay as set above for the whole interval
-        for _ in range(substeps):
+        for sub in range(substeps):
+            a, b = k + sub / substeps, k + (sub + 1.0) / substeps
+            mid = k + (sub + 0.5) / substeps
+            if shaped:
+                _shape_inputs(sig, inputs, in_linear, in_shift, a, a, b, skip)
             _derivative(x, k1, sig, order, integ, ti, tf, src, sgn, nl, buf, zero0)
             for i in range(x.size):
                 xs[i] = x[i] + 0.5 * h * k1[i]
+            if shaped:
+                _shape_inputs(sig, inputs, in_linear, in_shift, mid, a, b, skip)
             _derivative(xs, k2, sig, order, integ, ti, tf, src, sgn, nl, buf, zero0)
             for i in range(x.size):
                 xs[i] = x[i] + 0.5 * h * k2[i]
             _derivative(xs, k3, sig, order, integ, ti, tf, src, sgn, nl, buf, zero0)
             for i in range(x.size):
                 xs[i] = x[i] + h * k3[i]
+            if shaped:
+                _shape_inputs(sig, inputs, in_linear, in_shift, b, a, b, skip)
             _derivative(xs, k4, sig, order, integ, ti, tf, src, sgn, nl, buf, zero0)
             for i in range(x.size):
                 x[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i])
@@ -444,7 +502,11 @@ def simulate_continuous(
         raise ValueError("`inputs` holds non-finite values")
     if not diagram.sample_time > 0:
         raise ValueError(f"sample_time must be > 0, got {diagram.sample_time}")
-    program = _compile(diagram, _environment(diagram, parameters), init, nonlinear)
+    env = _environment(diagram, parameters)
+    program = _compile(diagram, env, init, nonlinear)
+    in_linear = np.array([s.intersample == "linear" for s in diagram.inputs], dtype=np.int64)
+    in_shift = np.array([0.0 if s.delay is None else (env[s.delay] if s.delay in env else float(s.delay))
+                         / diagram.sample_time for s in diagram.inputs], dtype=float)
     for out in diagram.output_names:
         if out not in program.names:
             raise ValueError(f"output '{out}' is neither a block nor an input of the chart")
@@ -454,7 +516,8 @@ def simulate_continuous(
     buf_len = max([int(program.ti[j, 7]) for j in program.delays] + [1])
     status, k = _run(np.ascontiguousarray(u), program.x0, program.ti, program.tf, program.src, program.sgn,
                      program.nl, program.order, program.order0, program.integ, program.delays, program.zero0,
-                     buf_len, int(substeps), diagram.sample_time / substeps, ctrl_i, ctrl_f, noise, rec)
+                     buf_len, int(substeps), diagram.sample_time / substeps, ctrl_i, ctrl_f, noise, rec, in_linear,
+                     in_shift)
     if status:
         what = "a signal" if status == 1 else "the state"
         raise ValueError(f"simulation blew up: {what} became non-finite at t = {k * diagram.sample_time:g} s "
