@@ -142,12 +142,13 @@ blocks:
 @pytest.mark.parametrize("field", ["sample_time", "init", "k", "neurons", "weights"])
 def test_huge_and_non_finite_numbers_are_errors_not_crashes(field, value):
     base = (DIAGRAMS / "engine.yaml").read_text()
+    curve = (DIAGRAMS.parent / "tests" / "data" / "engine_neurons.yaml").read_text()  # a curve with `neurons: 3`
     text = {
         "sample_time": base.replace("sample_time: 0.001", f"sample_time: {value}"),
         "init": base.replace("init: 0.6", f"init: {value}"),
         "k": base.replace("k: 1/J1", f"k: {value}"),
-        "neurons": base.replace("neurons: 3", f"neurons: {value}"),
-        "weights": base.replace("neurons: 3", f"neurons: 1, weights: {{a: [{value}], v: [1]}}"),
+        "neurons": curve.replace("neurons: 3", f"neurons: {value}"),
+        "weights": curve.replace("neurons: 3", f"neurons: 1, weights: {{a: [{value}], v: [1]}}"),
     }[field]
     with pytest.raises(SdnnError) as info:
         compile_diagram(diagram_from_text(text, "big.yaml"))

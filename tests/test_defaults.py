@@ -101,7 +101,7 @@ def test_compile_explain_prints_the_default_n(tmp_path):
 
 
 @pytest.mark.parametrize("pinned", ["paper/engine.yaml", "paper/two_mass.yaml", "paper/plant.yaml",
-                                    "engine.yaml", "two_mass.yaml"])
+                                    "two_mass.yaml"])
 def test_the_papers_charts_pin_its_scheme(pinned):
     """The paper's experiment and the README's first commands keep the network they were measured with."""
     d = load_diagram(DIAGRAMS / pinned)

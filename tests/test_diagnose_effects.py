@@ -167,9 +167,11 @@ def test_cogging_with_amplitudes_set_equals_a_hand_written_chart():
 
 
 def test_friction_with_weights_set_equals_a_hand_written_curve():
-    patched = Friction(slopes=(8.0,)).patch(TWO, _place(speeds(TWO), "w2"), 1.0)
+    patched = Friction().patch(TWO, _place(speeds(TWO), "w2"), 1.0)
+    curve = patched.block("fric_w2")
+    assert curve.basis == "tanh" and set(curve.weights.v) == {0.0}  # neutral: the flat curve of the basis
     patched = dataclasses.replace(patched, blocks=tuple(
-        dataclasses.replace(b, weights=NonlinearWeights((8.0,), (0.7,), (0.0,))) if b.name == "fric_w2" else b
+        dataclasses.replace(b, weights=NonlinearWeights((8.0,), (0.7,), None)) if b.name == "fric_w2" else b
         for b in patched.blocks))
     hand = CHART_WITH.replace("EXTRA", "-FR").replace(
         "  w2:   {type: integrator, in: acc2}\n",
@@ -198,7 +200,8 @@ def test_backlash_keeps_the_spring_signal_name_and_adds_an_odd_curve():
     assert mc.kind == "sum" and {t.signal for t in mc.inputs} == {"MC_lin", "bl_dphi"}
     assert patched.block("MC_lin").k == TWO.block("MC").k
     curve = patched.block("bl_dphi")
-    assert curve.bias is False and set(curve.weights.v) == {0.0}
+    # odd (no bias), flat at the start, and no linear term of its own: the spring's gain is that
+    assert not curve.bias and set(curve.weights.v) == {0.0} and curve.weights.c is None
 
 
 def test_new_names_never_clash_with_existing_ones():

@@ -94,10 +94,11 @@ def test_friction_offers_the_physical_terms_as_a_second_option_of_the_same_place
     one = chart("one_mass")
     place = speeds(one)[0]
     assert Coulomb().options(one, place, Scales({"v": 0.3})) == (0.3,)
-    opts = BUILTIN_EFFECTS["friction"].options(one, place, Scales({"v": 0.3}))
-    assert opts == (0.3, Physical(0.3)) and str(opts[1]) == "coulomb"
+    # the learned curve's option is the speed's span (its largest |value|, 3 RMS where unknown)
+    opts = BUILTIN_EFFECTS["friction"].options(one, place, Scales({"v": 0.3}, {"v": -0.5}, {"v": 0.8}))
+    assert opts == (0.8, Physical(0.3)) and str(opts[1]) == "coulomb"
     assert [Friction().label(o) for o in opts] == ["", "coulomb"]
-    assert Friction(physical=None).options(one, place, Scales({"v": 0.3})) == (0.3,)
+    assert Friction(physical=None).options(one, place, Scales({"v": 0.3})) == (pytest.approx(0.9),)
     via_friction = Friction().patch(one, place, Physical(0.3))
     assert via_friction == Coulomb().patch(one, place, 0.3)
     assert "coulomb" not in BUILTIN_EFFECTS  # reached through friction: one (effect, place) key, one refit slot

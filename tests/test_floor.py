@@ -156,16 +156,29 @@ def test_floor_never_writes_a_non_finite_number(monkeypatch):
 
 
 def test_the_advised_substeps_remove_the_warning_on_the_bundled_example():
-    """The README's first command warns; following its advice (a concrete N, not `auto`, which reads the modes at
-    the chart's init while the fitted friction curve is far steeper) removes the warning. The oracle is the
-    continuous chart itself, through a second fit."""
-
-
+    """At the paper's one step per sample the bundled example warns; following its advice (a concrete N) removes
+    the warning. The oracle is the continuous chart itself, through a second fit."""
     root = Path(__file__).resolve().parent.parent
     chart, data = sd.load_chart(root / "diagrams/engine.yaml"), sd.read_csv(root / "examples/data/engine_idle.csv")
-    first = sd.identify(chart, data)
+    first = sd.identify(dataclasses.replace(chart, substeps=1), data)
     (warning,) = [w for w in first.warnings if w.startswith("the discretization floor")]
     n = int(re.search(r"`substeps: (\d+)`", warning).group(1))
     again = sd.identify(dataclasses.replace(chart, substeps=n), data)
     assert not [w for w in again.warnings if w.startswith("the discretization floor")]
     assert again.to_document()["discretization"]["floor"]["rms"]["w1"] < first.to_document()["discretization"]["floor"]["rms"]["w1"] / (n / 2)
+
+
+def test_auto_substeps_refit_finer_when_the_fitted_curve_outgrows_them():
+    """With `substeps: auto` (N read at the flat curve of the init) the fit is redone at 4x N from its own values
+    when the floor, measured against the continuous chart, exceeds the warning's share of the residual: the result
+    then carries no floor warning and says what it did."""
+    root = Path(__file__).resolve().parent.parent
+    chart, data = sd.load_chart(root / "diagrams/engine.yaml"), sd.read_csv(root / "examples/data/engine_idle.csv")
+    out = sd.identify(chart, data, floor_bias=False)
+    doc = out.to_document()
+    refit = doc["substeps_refit"]
+    assert refit["substeps"] < doc["discretization"]["substeps"] and doc["discretization"]["requested"] is None
+    assert any(w.startswith("substeps auto: N = ") for w in out.warnings)
+    assert not [w for w in out.warnings if w.startswith("the discretization floor")]
+    assert doc["discretization"]["floor"]["rms"]["w1"] < FLOOR_WARN * doc["fit"]["train"]["rms"]["w1"]
+    assert out.parameters["J1"].init == chart.parameter("J1").init  # the user's start, not the first fit's

@@ -66,7 +66,7 @@ blocks:
   acc1: {type: gain, in: MB1, k: 1/J1}
   w1:   {type: integrator, in: acc1}
   G:    {type: gain, in: w1, k: g}
-  MR1:  {type: nonlinear, in: w1, neurons: 3}
+  MR1:  {type: nonlinear, in: w1, neurons: 3, basis: neurons}
 """
 
 

@@ -280,4 +280,6 @@ def test_batch_takes_shooting_and_finds_what_identify_finds(tmp_path):
     plain = runner.invoke(main, ["identify", str(files / "d.csv"), "--diagram", str(COULOMB), "-o",
                                  str(tmp_path / "p.json"), "--quiet"])
     assert plain.exit_code == 0
-    assert json.loads((tmp_path / "p.json").read_text())["optimizer"]["iterations"] != int(row["iterations"])
+    # single shooting ends elsewhere at the 1e-9 level: the batch's agreement with the shooting run is the setting's
+    other = json.loads((tmp_path / "p.json").read_text())["parameters"]
+    assert any(float(row[n]) != pytest.approx(other[n]["value"], rel=1e-9) for n in ("J2", "c", "d"))

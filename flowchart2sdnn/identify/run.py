@@ -133,6 +133,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     problem, warnings = start_stability(problem, x0)
     lower, upper = problem.bounds()
     warnings += on_bound_warnings(problem.names, x0, lower, upper)
+    start_warnings = tuple(warnings)  # about the user's start: a refit from the fit's values keeps them
 
     auto, requested_shooting = None, settings.shooting
     if settings.shooting == "auto":  # the rule reads the records (identify.shootauto); the window has no shooting
@@ -208,7 +209,9 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
             oracle = None
         disc["floor"] = measure_floor(chart, problem.compiled, x, [(d, 0) for d in records], settings.alignment,
                                       oracle)
-        finer = _finer_substeps(diagram, problem, disc["floor"], fit.train.rms, out, status)
+        # on records a free run cannot follow (multiple shooting kept) the floor measures the chaos, not the step
+        finer = (_finer_substeps(diagram, problem, disc["floor"], fit.train.rms, out, status)
+                 if settings.shooting == "off" else None)
         if finer is not None:  # auto's N read at the init is too coarse for what the data made of the chart
             given = full if settings.split is not None else (records if more else train)
             again = identify(replace(with_values(diagram, params, curves), substeps=finer), given, validation,
@@ -220,9 +223,11 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
             again_params = {n: replace(e, init=inits.get(n, e.init)) for n, e in again.parameters.items()}
             first = {"substeps": problem.network.substeps, "iterations": out.lm.iterations, "cost": float(out.lm.cost),
                      **({"then": again.extra["substeps_refit"]} if "substeps_refit" in again.extra else {})}
-            return replace(again, parameters=again_params, warnings=(note,) + again.warnings,
+            disc_again = {**again.extra.get("discretization", {}), "requested": disc.get("requested")}
+            kept = start_warnings + tuple(w for w in again.warnings if w not in start_warnings)
+            return replace(again, parameters=again_params, warnings=(note,) + kept,
                            source=ChartSource(diagram.name, diagram.file, diagram.source_sha256),
-                           extra={**again.extra, "substeps_refit": first})
+                           extra={**again.extra, "discretization": disc_again, "substeps_refit": first})
         warnings.extend(floor_warnings(disc["floor"], fit.train.rms, diagram, problem.network))
         if settings.floor_bias and out.lm is not None and not interrupted and status != "no_excitation":
             free = {n: e for n, e in parameters.items() if not e.fixed and n not in means}
@@ -259,7 +264,7 @@ def _finer_substeps(diagram: Diagram, problem: Problem, floor: dict, rms: dict, 
     rest keeps more than HELD_CHATTER of its amplitude a step (a curve held by the scheme); else None."""
     if requested_substeps(diagram) not in (None, "auto") or out.lm is None or out.interrupted:
         return None
-    if status in ("no_excitation", "diverged_at_start") or not floor.get("rms"):
+    if status not in CONVERGED_STATUSES or not floor.get("rms"):  # only a fit at its minimum says what N it needs
         return None
     n = problem.network.substeps
     if n >= AUTO_CAP:
