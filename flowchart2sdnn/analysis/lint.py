@@ -14,6 +14,7 @@
 | LINT010 | error    | chart with no input or no output |
 | LINT011 | error    | a gain cannot be evaluated at the parameters' initial values (1/J with J = 0, overflow) |
 | LINT012 | warning  | the argument of a `sqrt` can be negative (a difference, k < 0, a negative start or constant) |
+| LINT013 | info     | what a learned curve can represent: odd or any shape, the range its basis spans, its linear term |
 """
 
 from __future__ import annotations
@@ -22,6 +23,7 @@ from fractions import Fraction
 
 import numpy as np
 
+from ..diagram.curves import describe_curve
 from ..diagram.model import Block, Diagram
 from ..diagram.units import DIMENSIONLESS, Unit, UnitError, parse_unit, unit_of_expr
 from ..errors import Diagnostic, Location
@@ -29,7 +31,7 @@ from ..expr import Expr, ExprError
 from .graph import chart_graph, distances
 from .loops import find_algebraic_loops
 
-__all__ = ["lint_diagram"]
+__all__ = ["lint_diagram", "curve_notes"]
 
 
 def lint_diagram(diagram: Diagram) -> list[Diagnostic]:
@@ -38,6 +40,12 @@ def lint_diagram(diagram: Diagram) -> list[Diagnostic]:
                   _sqrt_domain):
         out.extend(check(diagram))
     return out
+
+
+def curve_notes(diagram: Diagram) -> list[Diagnostic]:
+    """One info line per learned curve: what it can represent (diagram.curves.describe_curve)."""
+    return [Diagnostic("LINT013", "info", describe_curve(diagram, b), _loc(diagram, b), b.name)
+            for b in diagram.blocks if b.kind == "nonlinear"]
 
 
 def _loc(diagram: Diagram, obj) -> Location:

@@ -52,15 +52,18 @@ def main() -> None:
 @handle_errors
 def lint(chart: str, fmt: str) -> None:
     """Check CHART: loops, signals, units, bounds, identifiability. Exit 1 when any error."""
+    from ..analysis.lint import curve_notes
     from ..compiler import check_file
+    from ..diagram.validate import load_diagram
 
     diagnostics = check_file(chart)
     errors = [d for d in diagnostics if d.severity == "error"]
+    notes = [] if errors else curve_notes(load_diagram(chart))  # what each learned curve can represent
     if fmt == "json":
-        click.echo(json.dumps({"file": chart, "errors": len(errors), "diagnostics": [d.to_dict() for d in diagnostics]},
-                              indent=1))
+        click.echo(json.dumps({"file": chart, "errors": len(errors), "diagnostics": [d.to_dict() for d in diagnostics],
+                               "curves": [d.to_dict() for d in notes]}, indent=1))
     else:
-        for d in diagnostics:
+        for d in diagnostics + notes:
             click.echo(d.one_line(), err=d.severity == "error")
         warnings = len(diagnostics) - len(errors)
         click.echo(f"{chart}: {len(errors)} error(s), {warnings} warning(s)", err=bool(errors))
