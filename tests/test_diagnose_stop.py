@@ -56,8 +56,9 @@ def test_an_unconverged_first_fit_is_not_traced(records):
     r = d.report
     assert r["first_fit"]["converged"] is False and r["first_fit"]["status"] == "max_iter"
     assert r["stop"] == r["last_round"] == "first_fit_not_converged"
+    assert r["first_fit"]["still_moving"]  # one iteration from the chart's init: the parameters still move
     assert r["candidates"] == [] and r["rounds"] == [] and r["accepted"] == [] and r["n_accepted"] == 0
-    assert "did not converge" in format_report(r)
+    assert "still moved by more than their standard error" in format_report(r)
     # on request it traces anyway (and friction is what this plant lacks)
     anyway = diagnose(chart("one_mass"), train, [val],
                       DiagnoseSettings(max_iter=1, rounds=1, require_converged=False), EFFECTS).report
@@ -140,5 +141,26 @@ def test_cli_refuses_an_unconverged_first_fit_in_one_line(files):
                                     "--max-iter", "1", "--effects", "damping", "--report", str(rep), "--quiet"])
     assert res.exit_code == 1
     lines = [ln for ln in res.output.splitlines() if ln.strip()]
-    assert len(lines) == 1 and "did not converge" in lines[0] and "nothing traced" in lines[0]
+    assert len(lines) == 1 and "still moved by more than their standard error" in lines[0]
+    assert "nothing traced" in lines[0]
     assert json.loads(rep.read_text())["stop"] == "first_fit_not_converged"
+
+
+def test_still_moving_names_what_one_iteration_left_and_nothing_at_the_minimum(records):
+    """The oracle: the standard errors and the Gauss-Newton step recomputed here with numpy from (J, e)."""
+    import numpy as np
+
+    from flowchart2sdnn.diagnose.fitting import fit_chart, still_moving
+
+    train, val = records
+    settings = DiagnoseSettings()
+    early = fit_chart(chart("one_mass"), [train], [(val, 0)], settings, 1, 0, "chart")
+    done = fit_chart(chart("one_mass"), [train], [(val, 0)], settings, settings.max_iter, 0, "chart")
+    assert done.identification.converged and still_moving(done) == []
+    moving = still_moving(early)
+    assert moving
+    p = early.identification.problem
+    e, J = p.fun(np.asarray(early.identification.x))
+    step = np.linalg.lstsq(J, e, rcond=None)[0]
+    i = p.names.index(moving[0])
+    assert abs(step[i]) > np.sqrt(float(e @ e) / len(e) * np.linalg.pinv(J.T @ J)[i, i])

@@ -220,8 +220,10 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     if report["stop"] == "first_fit_not_converged":
         # exit 1 (a failed run), after the report is written: REPORT.json holds the unconverged fit
         first = report["first_fit"]
-        click.echo(f"error: {chart}: the first fit did not converge ({first['status']}), nothing traced; "
-                   "raise --max-iter or improve the chart's init (or --allow-unconverged)", err=True)
+        moving = ", ".join(first.get("still_moving") or []) or "?"
+        click.echo(f"error: {chart}: the first fit stopped ({first['status']}) while {moving} still moved by more "
+                   "than their standard error, nothing traced; raise --max-iter or improve the chart's init "
+                   "(or --allow-unconverged)", err=True)
         sys.exit(1)
     if report.get("interrupted"):
         click.echo("interrupted: the chart and report hold what was accepted before Ctrl-C", err=True)

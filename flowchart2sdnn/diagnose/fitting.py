@@ -15,6 +15,7 @@ import numpy as np
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
+from ..fit.effective import effective_samples
 from ..identify.floor import measure_floor, pooled_floor
 from ..identify.initstate import estimate_initial_state
 from ..identify.problem import Problem, build_problem, data_init, metrics
@@ -27,7 +28,7 @@ from .residual import signal_correlation, whiteness
 
 __all__ = ["DiagnoseSettings", "Fitted", "fit_chart", "with_floor", "fit_growing", "horizons", "current_problem", "effect_scales",
            "residual_analysis", "DEFAULT_SPLIT", "VALIDATION_SEGMENTS", "gain_spread", "unpredictable",
-           "far_above_noise"]
+           "far_above_noise", "still_moving"]
 
 DEFAULT_SPLIT = 0.7
 #: The validation records are cut into about this many consecutive parts in all (at least 2 per record): the
@@ -306,6 +307,26 @@ def unpredictable(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettin
     if problem is None or not _above_noise(fitted, problem, NOISE_MARGIN):
         return False
     return choose_shooting(problem, problem.compiled.theta0()).peak > SUSPECT_PEAK
+
+
+def still_moving(fitted: Fitted) -> list[str]:
+    """The quantities an unfinished fit would still move by more than their standard error: the undamped
+    Gauss-Newton step from where it stopped, against sqrt(sigma² (JᵀJ)⁻¹_ii) with sigma² the residual's variance
+    per effective sample (fit.effective). Empty when the fit is at its minimum in that sense, whatever stopped it."""
+    ident = fitted.identification
+    problem, x = ident.problem, ident.x
+    if problem is None or x is None or not problem.names:
+        return []
+    out = problem.fun(np.asarray(x, dtype=float))
+    if out is None:
+        return list(problem.names)
+    e, J = out
+    J = np.asarray(J.toarray() if hasattr(J, "toarray") else J, dtype=float)
+    step, *_ = np.linalg.lstsq(J, e, rcond=None)
+    sigma2 = float(e @ e) / effective_samples(e, len(problem.compiled.output_names))
+    cov = sigma2 * np.linalg.pinv(J.T @ J, rcond=1e-12)
+    se = np.sqrt(np.clip(np.diag(cov), 0.0, None))
+    return [n for n, d, s in zip(problem.names, step, se, strict=True) if abs(d) > s]
 
 
 def far_above_noise(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings, ratio: float) -> bool:

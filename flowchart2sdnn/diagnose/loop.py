@@ -57,6 +57,7 @@ from .fitting import (
     gain_spread,
     horizons,
     residual_analysis,
+    still_moving,
     unpredictable,
     with_floor,
 )
@@ -309,8 +310,10 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
     # an unconverged first fit is no baseline: the effect that lets a refit escape its unfinished descent (or
     # its local minimum) "explains" the residual whether the plant has it or not (issue 16: train RMS 1.28 on
     # a chart whose best fit is 0.06, then false alarms)
-    unconverged = (not interrupted and settings.require_converged
-                   and nominal.identification.converged is False)
+    # a fit stopped by the iteration limit is still a baseline when nothing would move by more than its standard
+    # error (a chart that lacks an effect ends far above the noise, at its own minimum): refuse only otherwise
+    moving = still_moving(nominal) if (not interrupted and nominal.identification.converged is False) else []
+    unconverged = not interrupted and settings.require_converged and bool(moving)
     try:
         if interrupted:
             raise KeyboardInterrupt
@@ -454,7 +457,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
         "last_round": stop_reason,
         "n_accepted": len(accepted),
         "first_fit": {"converged": nominal.identification.converged, "status": nominal.identification.status,
-                      "message": nominal.identification.message},
+                      "message": nominal.identification.message, "still_moving": moving},
         "interrupted": interrupted,
         "candidates": candidates_out,
         "rounds": rounds,

@@ -14,8 +14,9 @@ STOP_MESSAGES = {
     "nothing_accepted": "no refitted candidate lowered both the validation error and the information criterion",
     "no_candidates": "no effect of the library attaches anywhere in the chart",
     "done_after_accepting": "effects were accepted, then the next round found nothing more to accept",
-    "first_fit_not_converged": "the first fit of the chart as given did not converge: nothing was traced "
-                               "(raise --max-iter, improve the chart's init, or --allow-unconverged)",
+    "first_fit_not_converged": "the first fit of the chart as given stopped while parameters still moved by more "
+                               "than their standard error: nothing was traced (raise --max-iter, improve the "
+                               "chart's init, or --allow-unconverged)",
     "interrupted": "interrupted (Ctrl-C)",
 }
 
