@@ -50,9 +50,8 @@ STATUS_MESSAGES: dict[str, str] = {
                          "iteration, or below `stall_decrease` over the last `stall_iterations`, or, at the noise floor "
                          "(`crawl_cost`), below `crawl_decrease` over the last `crawl_iterations` (or, with the "
                          "trust radius, the model's best decrease is below the cost's rounding)",
-    "negligible_gain": "what is left to gain is negligible: the Gauss-Newton step would lower -2 log-likelihood "
-                       "by less than `negligible_gain` units at the residual's own variance and so did the last "
-                       "step, or the last `pace_iterations` together gained less than `negligible_pace` units",
+    "negligible_gain": "what is left to gain is negligible (in units of -2 log-likelihood at the residual's own "
+                       "variance)",
     "callback_stop": "stopped by the callback",
     "interrupted": "interrupted (KeyboardInterrupt); the best point so far is returned",
 }

@@ -40,8 +40,9 @@ def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str
         out.append("")
         for block, w in result.curves.items():
             state = "fixed" if w.fixed else "learned"
-            out.append(f"nonlinear {block}: {len(w.a)} tanh neurons ({state}), slope at 0 = {w.slope_at_zero:.4g}, "
-                       f"y = sum v_i tanh(a_i x{' + b_i' if w.b is not None else ''})")
+            linear = "" if w.c is None else f" + c x (c = {w.c:.4g})"
+            out.append(f"nonlinear {block}: {len(w.a)} tanh terms ({state}), slope at 0 = {w.slope_at_zero:.4g}, "
+                       f"y = sum v_i tanh(a_i x{' + b_i' if w.b is not None else ''}){linear}")
     out.append("")
     fit_rows = []
     for which, m in (("train", result.fit.train), ("validation", result.fit.validation)):
