@@ -99,12 +99,15 @@ def compile_(chart: str, output: str | None, explain: bool, dot: str | None, svg
     net = comp.network
     if output:
         atomic_write_text(output, net.to_json())
+        click.echo(f"wrote {output}", err=True)  # stderr: stdout stays the network or the explanation
     if dot:
         atomic_write_text(dot, network_dot(net))
+        click.echo(f"wrote {dot}", err=True)
     if svg:
         from ..analysis.drawing import chart_svg
 
         atomic_write_text(svg, chart_svg(comp.diagram))
+        click.echo(f"wrote {svg}", err=True)
     if explain:
         click.echo(explain_network(net), nl=False)
         click.echo("\n" + comp.substeps.explain(net.sample_time))
@@ -147,6 +150,7 @@ def simulate(chart, data, output, params, continuous, signals, alignment, subste
     columns = simulate_chart(diagram, ds, alignment=alignment, continuous=continuous, all_signals=signals == "all")
     if output:
         write_csv(output, columns)
+        click.echo(f"wrote {output}: {ds.n_rows} rows, columns {', '.join(columns)}", err=True)
     else:
         names = list(columns)
         click.echo(",".join(names))

@@ -87,8 +87,9 @@ def needs_span(block: Block) -> bool:
 
 def basis_weights(diagram: Diagram, block: Block, span: float) -> NonlinearWeights:
     """The flat curve (v = 0, c = 0) of the tanh basis over an input range of +-span."""
-    span = span if math.isfinite(span) and span > 0 else 1.0
     n = block.neurons or 3
+    # a span so small that the steepest slope overflows is no range at all (an input that never moves)
+    span = span if math.isfinite(span) and span > 0 and math.isfinite(max(basis_gains(n)) / span) else 1.0
     a = tuple(g / span for g in basis_gains(n))
     return NonlinearWeights(a, (0.0,) * n, (0.0,) * n if block.bias else None,
                             0.0 if has_linear_term(diagram, block) else None)

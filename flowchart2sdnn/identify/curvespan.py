@@ -19,6 +19,7 @@ from ..compiler import compile_diagram
 from ..data.csvdata import Dataset
 from ..diagram.curves import basis_weights, needs_span
 from ..diagram.model import Diagram
+from ..errors import SdnnError
 from ..network.alignment import network_inputs
 from ..network.runtime import CompiledNetwork
 
@@ -77,7 +78,7 @@ def with_spans(diagram: Diagram, records: Sequence[Dataset], alignment: str = "z
                                               for b in diagram.blocks))
         try:
             run = _free_run(chart, records[0], alignment)
-        except (ValueError, KeyError, FloatingPointError):
+        except (ValueError, KeyError, FloatingPointError, SdnnError):  # the fit's own compile will say why
             run = None
     spans, blocks = {}, []
     for b in diagram.blocks:
