@@ -92,7 +92,8 @@ def one_draw(family: str, seed: int, seconds: float, noise: float) -> dict:
     one = identify(chart, data, settings=IdentifySettings(seed=seed, floor_bias=False))
     secs = time.perf_counter() - t0
     ranges = {p.name: (p.init / SPREAD, p.init * SPREAD) for p in chart.parameters}  # where a user's doubt lies
-    best = identify(chart, data, settings=IdentifySettings(seed=seed, starts=8, ranges=ranges, floor_bias=False))
+    best = identify(chart, data, settings=IdentifySettings(seed=seed, starts=8, ranges=ranges, floor_bias=False,
+                                                           max_iter=200))  # a reference: slow starts are cut
     ref = min(float(one.lm.cost), float(best.lm.cost))
     iterations, refit = one.lm.iterations, one.extra.get("substeps_refit")
     while refit:  # a first fit at a coarser N (identify's finer sub-steps) counts too
