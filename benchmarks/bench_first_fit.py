@@ -35,8 +35,15 @@ CATEGORIES = ("one-missing-aprbs", "one-missing-multisine", "one-missing-closed-
               "two-missing-aprbs", "two-missing-closed-loop")
 
 
+class DrawFailed(Exception):
+    """The scenario itself could not be simulated (the generator's plant blew up): no record, nothing to judge."""
+
+
 def one_draw(seed: int, category: str, root: Path) -> dict:
-    scenario = draw(seed, category)
+    try:
+        scenario = draw(seed, category)
+    except (ValueError, FloatingPointError) as exc:
+        raise DrawFailed(str(exc)) from exc
     paths = write_scenario(scenario, root / f"seed{seed}")
     chart = load_chart(paths["chart"])
     train, val = read_csv(paths["train"], chart=chart), read_csv(paths["validation"], chart=chart)
@@ -64,7 +71,10 @@ def main() -> None:
             category = args.category or CATEGORIES[i % len(CATEGORIES)]
             try:
                 r = one_draw(seed, category, Path(tmp))
-            except Exception as exc:  # noqa: BLE001  (a draw that raises is a result: counted as refused)
+            except DrawFailed as exc:
+                print(f"{category:24s} seed {seed:>10d} not drawn: {str(exc)[:100]}", flush=True)
+                continue
+            except Exception as exc:  # noqa: BLE001  (a fit that raises is a result: counted as refused)
                 r = {"seed": seed, "category": category, "status": f"error: {exc}"[:120], "iterations": 0,
                      "refused": True, "moving": [], "seconds": 0.0, "family": "?", "sensor": "?", "missing": []}
             rows.append(r)
