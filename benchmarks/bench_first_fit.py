@@ -39,9 +39,9 @@ class DrawFailed(Exception):
     """The scenario itself could not be simulated (the generator's plant blew up): no record, nothing to judge."""
 
 
-def one_draw(seed: int, category: str, root: Path) -> dict:
+def one_draw(seed: int, category: str, root: Path, seconds: float | None = None) -> dict:
     try:
-        scenario = draw(seed, category)
+        scenario = draw(seed, category, seconds=seconds)
     except (ValueError, FloatingPointError) as exc:
         raise DrawFailed(str(exc)) from exc
     paths = write_scenario(scenario, root / f"seed{seed}")
@@ -62,15 +62,16 @@ def main() -> None:
     ap.add_argument("--n", type=int, default=30, help="draws in all (spread over the categories)")
     ap.add_argument("--seed", type=int, action="append", help="replay these seeds (with --category)")
     ap.add_argument("--category", choices=CATEGORIES)
+    ap.add_argument("--seconds", type=float, help="fix the training record's length (default: drawn, 10-60 s)")
     args = ap.parse_args()
     seeds = args.seed or [int(s) for s in np.random.SeedSequence().generate_state(args.n)]
-    print(f"# seeds drawn: {seeds}", flush=True)
+    print(f"# seeds drawn: {seeds}" + (f"; records {args.seconds:g} s" if args.seconds else ""), flush=True)
     rows = []
     with tempfile.TemporaryDirectory() as tmp:
         for i, seed in enumerate(seeds):
             category = args.category or CATEGORIES[i % len(CATEGORIES)]
             try:
-                r = one_draw(seed, category, Path(tmp))
+                r = one_draw(seed, category, Path(tmp), args.seconds)
             except DrawFailed as exc:
                 print(f"{category:24s} seed {seed:>10d} not drawn: {str(exc)[:100]}", flush=True)
                 continue
