@@ -22,6 +22,7 @@ from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..network.alignment import network_inputs
 from ..network.runtime import CompiledNetwork
+from .problem import columns_of, data_init, network_input_names  # problem imports this module lazily
 
 __all__ = ["with_spans", "input_span"]
 
@@ -35,12 +36,9 @@ def _largest(values) -> float | None:
 def _free_run(diagram: Diagram, data: Dataset, alignment: str) -> dict[str, np.ndarray]:
     network = compile_diagram(diagram).network
     compiled = CompiledNetwork(network)
-    names = [s.name for s in network.inputs]
-    u = np.column_stack([np.asarray(data.columns[n], dtype=float) for n in names]) if names else \
-        np.zeros((data.n_rows, 0))
-    init = {s.data: float(data.columns[s.data][0]) for s in network.initial_states if s.data}
+    u = columns_of(data, network_input_names(network))
     with np.errstate(all="ignore"):
-        return compiled.signals(compiled.theta0(), network_inputs(u, alignment), init)
+        return compiled.signals(compiled.theta0(), network_inputs(u, alignment), data_init(network, data))
 
 
 def input_span(diagram: Diagram, signal: str, records: Sequence[Dataset], run: dict | None) -> float | None:

@@ -223,7 +223,7 @@ def build_problem(diagram: Diagram, data: Dataset, alignment: str = "zoh", seed:
     Learned curves of the tanh basis without slopes get them over their input's range in the records
     (identify.curvespan); the problem's `diagram` is the chart with them."""
     if network is None:
-        from .curvespan import with_spans  # curvespan compiles and runs the chart as this module does
+        from .curvespan import with_spans  # curvespan reads records through this module's helpers
 
         diagram, _ = with_spans(diagram, (data, *more), alignment)
         network = compile_diagram(diagram, seed=seed).network
