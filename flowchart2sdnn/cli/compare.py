@@ -10,6 +10,7 @@ import json
 import click
 
 from ..strictjson import strict_json
+from .help import SectionedCommand
 from .options import (
     alignment_option,
     column_reading,
@@ -19,11 +20,12 @@ from .options import (
     rows_option,
     windowed,
 )
+from .order import MODEL_SUFFIXES, chart_first
 
 __all__ = ["compare"]
 
 
-@click.command(name="compare")
+@click.command(name="compare", cls=SectionedCommand, sections={"Comparison": ("horizon",)})
 @click.argument("model", type=click.Path(dir_okay=False))
 @click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--horizon", type=click.IntRange(min=1),
@@ -53,6 +55,7 @@ def compare(model, data, horizon, output, chart, alignment, mapping, units, fmt,
     from ..network.runtime import CompiledNetwork
     from ..tables import table
 
+    model, data = chart_first("sdnn compare MODEL DATA...", model, data, MODEL_SUFFIXES)
     if output:
         from ..identify.plots import require_matplotlib
 
