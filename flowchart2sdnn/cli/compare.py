@@ -76,6 +76,8 @@ def compare(model, data, horizon, output, chart, alignment, mapping, units, fmt,
     if fmt == "json":
         click.echo(json.dumps(strict_json({"model": model, "horizon": horizon, "alignment": alignment,
                                            "records": rows}), indent=1))
+        if output:
+            click.echo(f"wrote {output}", err=True)  # stderr: stdout stays the JSON
     else:
         what = "free run" if horizon is None else f"{horizon}-step-ahead prediction"
         click.echo(f"{diagram.name}, {what}:")

@@ -181,10 +181,11 @@ def identify(paths, diagram, output, fix_from, validation, init_window, shooting
             n = max(3, int(round(split * train[0].n_rows)))
             records = [(records[0][0], train[0].slice(0, n), 0)]
             checks = [(f"validation: {Path(train[0].path).name} after the split", train[0], n)]
+    figures = []
     if plots:
         from ..identify.plots import write_plots
 
-        write_plots(outcome, plots, records, checks)
+        figures = write_plots(outcome, plots, records, checks)
     if html_path:
         from ..identify.html import identification_html, write_html
 
@@ -196,6 +197,8 @@ def identify(paths, diagram, output, fix_from, validation, init_window, shooting
             click.echo(f"wrote {output} and {chart_out}")
         if html_path:
             click.echo(f"wrote {html_path}")
+        if plots:
+            click.echo(f"wrote {len(figures)} figure(s) to {plots}")
     if outcome.converged is False and outcome.status != "interrupted":
         click.echo(f"warning: not converged: {outcome.message} (raise --max-iter, or start closer)", err=True)
     if outcome.status == "interrupted":

@@ -112,5 +112,5 @@ def linearize(model, data, at, kink, control_path, bode, chart, mapping, units, 
         click.echo("poles:\n" + table(["pole (1/s)", "wn (rad/s)", "f (Hz)", "damping ratio", "damped f (Hz)"],
                                       rows), nl=False)
     for path in (control_path, bode):
-        if path and fmt == "text":
-            click.echo(f"wrote {path}")
+        if path:
+            click.echo(f"wrote {path}", err=fmt == "json")  # with --format json stdout stays the JSON
