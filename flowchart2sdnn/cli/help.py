@@ -29,11 +29,15 @@ OTHER = "Other"
 
 
 def place_of(name: str, extra: dict[str, tuple[str, ...]] | None = None) -> tuple[str, int]:
-    """The title of the section option `name` is printed in, and its rank there (the command's own first)."""
-    for rank, table in enumerate((extra or {}, SECTIONS)):  # the command's own first: it may put an option elsewhere
-        for title, names in table.items():
-            if name in names:
-                return title, rank * 1000 + names.index(name)
+    """The title of the section option `name` is printed in, and its rank there: the shared options of a
+    section first, in :data:`SECTIONS` order, then those a command adds to it, in its order."""
+    for title, names in (extra or {}).items():  # the command's own first: it may put an option elsewhere
+        if name in names:
+            shared = SECTIONS.get(title, ())
+            return title, shared.index(name) if name in shared else 1000 + names.index(name)
+    for title, names in SECTIONS.items():
+        if name in names:
+            return title, names.index(name)
     return OTHER, 0
 
 

@@ -118,7 +118,7 @@ def compile_(chart: str, output: str | None, explain: bool, dot: str | None, svg
 
 
 # ------------------------------------------------------------------------------------------------ simulate
-@main.command(cls=SectionedCommand, sections={"Output": ("params", "continuous", "signals")})
+@main.command(cls=SectionedCommand, sections={"Data and chart": ("params",), "Simulation": ("continuous", "signals")})
 @click.argument("chart", type=click.Path(dir_okay=False))
 @click.argument("data", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", type=click.Path(dir_okay=False), help="Output CSV (default: stdout).")
