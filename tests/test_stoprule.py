@@ -3,9 +3,13 @@ to end the fit (the oracle is the choice of options), then reads the rule back f
 
 from __future__ import annotations
 
+from pathlib import Path
+
 import numpy as np
 import pytest
+from click.testing import CliRunner
 
+from flowchart2sdnn.cli import main
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.fit.stoprule import status_line, stop_rule
 
@@ -58,3 +62,17 @@ def test_the_status_line_says_whether_the_fit_converged():
     line = status_line(res.status, res.message, False)
     assert line.startswith("status: max_iter (not converged after 2 iterations, cost ")
     assert line.endswith("the iteration limit max_iter was reached")
+
+
+def test_identify_names_the_rule_on_its_status_line_and_its_not_converged_warning(tmp_path):
+    chart = str(Path(__file__).resolve().parents[1] / "diagrams" / "mass_spring_damper.yaml")
+    runner = CliRunner()
+    made = runner.invoke(main, ["excite", chart, "--seconds", "0.3", "--amplitude", "-50", "50",
+                                "-o", str(tmp_path / "msd.csv")])
+    assert made.exit_code == 0, made.output
+    res = runner.invoke(main, ["identify", chart, str(tmp_path / "msd.csv"), "--max-iter", "1", "--shooting", "off",
+                               "--no-floor-bias"])
+    assert res.exit_code == 0, res.output
+    assert res.stdout.startswith("status: max_iter (not converged after 1 iteration, cost ")
+    assert "warning: not converged: the iteration limit max_iter was reached (after 1 iteration); raise --max-iter" \
+        in res.stderr

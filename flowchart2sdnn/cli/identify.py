@@ -200,7 +200,12 @@ def identify(paths, diagram, output, fix_from, validation, init_window, shooting
         if plots:
             click.echo(f"wrote {len(figures)} figure(s) to {plots}")
     if outcome.converged is False and outcome.status != "interrupted":
-        click.echo(f"warning: not converged: {outcome.message} (raise --max-iter, or start closer)", err=True)
+        from ..fit.stoprule import stop_rule
+
+        rule = stop_rule(outcome.status, outcome.message)  # the one rule that ended it, not the whole message
+        why = f"{rule.sentence} (after {rule.iterations} iteration{'s' * (rule.iterations != 1)})" if rule \
+            else outcome.message
+        click.echo(f"warning: not converged: {why}; raise --max-iter, or start closer", err=True)
     if outcome.status == "interrupted":
         click.echo(f"interrupted: {'the best result so far is in ' + output if output else 'no -o, nothing written'}",
                    err=True)
