@@ -50,10 +50,10 @@ def chart_and_data(command: str, paths: tuple[str, ...], diagram: str | None) ->
     usage = f"sdnn {command} CHART DATA..."
     if diagram is not None:
         if paths and _is(paths[0], CHART_SUFFIXES):
-            raise click.UsageError(f"two charts: '{paths[0]}' and --diagram '{diagram}'; write {usage}")
-        _note(f"'sdnn {command} DATA... --diagram CHART' is the old argument order and will go; "
-              f"write {usage}")
+            raise click.UsageError(f"two charts: '{paths[0]}' and --diagram '{diagram}'; write '{usage}'")
+        _note(f"'sdnn {command} DATA... --diagram CHART' is the old argument order and will go: "
+              f"write '{usage}'")
         return diagram, paths
     if len(paths) < 2:
-        raise click.UsageError(f"expected the chart and at least one data record: {usage}")
+        raise click.UsageError(f"expected the chart and at least one data record: '{usage}'")
     return chart_first(usage, paths[0], paths[1:])
