@@ -79,7 +79,7 @@ def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> li
 @force_option("Start the results table over (it holds other settings).")
 @click.option("--diagnose", is_flag=True,
               help="Also diagnose each file; the effects it adds (e.g. friction) go to the 'effects' column.")
-@click.option("--quiet", is_flag=True, help="No progress bar and no summary.")
+@click.option("--quiet", is_flag=True, help="No progress bar, summary or 'wrote' line (errors still go to stderr).")
 @handle_errors
 def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_iter, alignment, substeps, shooting,
           mapping, units, retry_errors, force, diagnose, quiet) -> None:

@@ -123,7 +123,7 @@ EFFECTS = {"Effect search": ("rounds", "effect_names", "effects_file", "top", "s
 @seed_option("Seed for initial curves.")
 @html_option()
 @force_option()
-@click.option("--quiet", is_flag=True, help="No progress and no report text.")
+@click.option("--quiet", is_flag=True, help="No progress, report text or 'wrote' lines (errors still go to stderr).")
 @executor_options("the candidate refits")
 @handle_errors
 def diagnose(paths, diagram, validation, split, output, report_path, rounds, effect_names, effects_file, plots,

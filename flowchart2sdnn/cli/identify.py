@@ -96,7 +96,8 @@ __all__ = ["identify"]
                    "Needs matplotlib: pip install flowchart2sdnn[plots].")
 @html_option()
 @force_option()
-@click.option("--quiet", is_flag=True, help="No progress and no table.")
+@click.option("--quiet", is_flag=True,
+              help="No progress, table or 'wrote' lines (errors and the not-converged warning still go to stderr).")
 @executor_options("the multi-start fits")
 @handle_errors
 def identify(paths, diagram, output, fix_from, validation, init_window, shooting, shooting_starts, threads, floor_bias, curve_start, lm_steps, lm_bounds, split, starts, seed, online, window, average,
