@@ -85,3 +85,15 @@ def test_an_option_named_nowhere_goes_to_other_and_a_command_can_claim_one():
     assert section_of("max_iter") == "Optimiser"
     assert section_of("max_iter", {"Effect search": ("max_iter",)}) == "Effect search"
     assert all(SECTIONS.values())
+
+
+def test_the_group_lists_every_command_once_in_the_order_of_a_first_session():
+    res = CliRunner().invoke(main, ["--help"], terminal_width=80)
+    assert res.exit_code == 0
+    listing = res.output.split("\nCommands:\n", 1)[1].split("\n\n", 1)[0].splitlines()
+    names = [line.split()[0] for line in listing]
+    assert sorted(names) == sorted(main.commands)  # each once, and each on one line at 80 columns
+    first = ["lint", "compile", "excite", "simulate", "identify"]
+    assert names[:5] == first and names.index("diagnose") > names.index("identify")
+    assert names.index("report") > names.index("batch")
+    assert "sdnn COMMAND CHART [DATA...]" in " ".join(res.output.split())

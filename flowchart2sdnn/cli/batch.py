@@ -58,6 +58,7 @@ def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> li
 
 
 @click.command(name="batch", cls=SectionedCommand,
+               short_help="Identify a chart on every log file of a fleet, resumably.",
                sections={"Output": ("retry_errors", "diagnose")})
 @click.argument("chart", type=click.Path(dir_okay=False))
 @click.argument("data", nargs=-1, required=True)

@@ -25,7 +25,8 @@ from .order import MODEL_SUFFIXES, chart_first
 __all__ = ["compare"]
 
 
-@click.command(name="compare", cls=SectionedCommand, sections={"Comparison": ("horizon",)})
+@click.command(name="compare", cls=SectionedCommand, sections={"Comparison": ("horizon",)},
+               short_help="Measured against model output: fit % and RMS per record.")
 @click.argument("model", type=click.Path(dir_okay=False))
 @click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--horizon", type=click.IntRange(min=1),

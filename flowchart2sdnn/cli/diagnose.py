@@ -62,7 +62,8 @@ EFFECTS = {"Effect search": ("rounds", "effect_names", "effects_file", "top", "s
                              "allow_unconverged")}
 
 
-@click.command(name="diagnose", cls=SectionedCommand, sections=EFFECTS)
+@click.command(name="diagnose", cls=SectionedCommand, sections=EFFECTS,
+               short_help="Trace the residual to missing effects, add them, refit.")
 @click.argument("paths", nargs=-1, required=True, type=click.Path(dir_okay=False), metavar="CHART DATA...")
 @click.option("--diagram", "diagram", type=click.Path(dir_okay=False),
               help="The chart, in the old order DATA... --diagram CHART (still read, with a note).")

@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import click
 
-__all__ = ["SECTIONS", "SectionedCommand", "place_of", "section_of"]
+__all__ = ["SECTIONS", "SectionedCommand", "WorkflowGroup", "place_of", "section_of"]
 
 #: section title -> the parameter names (click's, e.g. ``validation`` for --validate) it holds, in print order
 #: (options named nowhere print in their declaration order).
@@ -72,3 +72,16 @@ class SectionedCommand(click.Command):
             if records:
                 with formatter.section(title):
                     formatter.write_dl([record for *_, record in sorted(records)])
+
+
+class WorkflowGroup(click.Group):
+    """The ``sdnn`` group: ``sdnn --help`` lists the commands in the order of a first session (check, build,
+    simulate, identify, inspect, diagnose, scale out), not alphabetically; a command not in `order` comes last."""
+
+    def __init__(self, *args, order: tuple[str, ...] = (), **kwargs) -> None:
+        super().__init__(*args, **kwargs)
+        self.order = tuple(order)
+
+    def list_commands(self, ctx: click.Context) -> list[str]:
+        rank = {name: i for i, name in enumerate(self.order)}
+        return sorted(self.commands, key=lambda name: (rank.get(name, len(rank)), name))

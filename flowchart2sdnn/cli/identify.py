@@ -38,7 +38,8 @@ from .terminal import CtrlC, Progress
 __all__ = ["identify"]
 
 
-@click.command(name="identify", cls=SectionedCommand)
+@click.command(name="identify", cls=SectionedCommand,
+               short_help="Identify a chart's parameters and learned curves from records.")
 @click.argument("paths", nargs=-1, required=True, type=click.Path(dir_okay=False), metavar="CHART DATA...")
 @click.option("--diagram", "diagram", type=click.Path(dir_okay=False),
               help="The chart, in the old order DATA... --diagram CHART (still read, with a note).")

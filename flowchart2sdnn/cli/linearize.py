@@ -25,6 +25,7 @@ def _matrix(name: str, m, rows, cols) -> str:
 
 
 @click.command(name="linearize", cls=SectionedCommand,
+               short_help="Linear model at an operating point: poles, damping, Bode.",
                sections={"Operating point": ("at", "kink"), "Output": ("control_path", "bode")})
 @click.argument("model", type=click.Path(dir_okay=False))
 @click.argument("data", nargs=-1, type=click.Path(dir_okay=False))

@@ -15,6 +15,7 @@ __all__ = ["report"]
 
 
 @click.command(name="report", cls=SectionedCommand,
+               short_help="Each parameter of a batch table over time; the drifting drives.",
                sections={"Drift": ("group", "threshold", "t_min", "ci_factor")})
 @click.argument("results", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "directory", type=click.Path(file_okay=False), required=True,
