@@ -12,10 +12,9 @@ import click
 
 __all__ = ["SECTIONS", "SectionedCommand", "WorkflowGroup", "place_of", "section_of"]
 
-#: section title -> the parameter names (click's, e.g. ``validation`` for --validate) it holds, in print order
-#: (options named nowhere print in their declaration order).
-#: An option named nowhere goes to "Other"; a command adds its own sections with ``sections=`` (placed before
-#: the optimiser's).
+#: section title -> the parameter names (click's, e.g. ``validation`` for --validate) it holds, in print order.
+#: An option named nowhere goes to "Other", in declaration order; a command adds its own sections with
+#: ``sections=`` (placed before the optimiser's).
 SECTIONS: dict[str, tuple[str, ...]] = {
     "Data and chart": ("mapping", "units", "rows", "delimiter", "decimal", "resample", "alignment", "intersample",
                        "substeps", "fix_from", "chart", "diagram"),
