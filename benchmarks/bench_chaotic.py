@@ -83,7 +83,7 @@ def main(settings: list[str], substeps: str | None, plants: list[str] | None = N
             shooting, _, starts = setting.partition(":")  # "120:free": --shooting 120 --shooting-starts free
             out = tmp / f"{name}_{shooting}_{starts}.json"
             t0 = time.time()
-            _cli("identify", str(train), "--diagram", str(chart), "--validate", str(val), "-o", str(out),
+            _cli("identify", str(chart), str(train), "--validate", str(val), "-o", str(out),
                  "--no-floor-bias", "--shooting", shooting,
                  *(["--shooting-starts", starts] if starts else []), *(["--substeps", substeps] if substeps else []))
             wall = time.time() - t0

@@ -6,7 +6,7 @@ The data (16 open-loop records, voltage in, both cart speeds out, 1 kHz) are rea
 Protocol (benchmarks/notes/real_flexible_drive.md has the results):
 
 * train on ``square_2V`` alone with :func:`flowchart2sdnn.identify.run.identify` (exactly what
-  ``sdnn identify square_2V.csv --diagram CHART --map u=u_V --map v1=v1_cart1_mm_s --map v2=v2_cart2_mm_s``
+  ``sdnn identify CHART square_2V.csv --map u=u_V --map v1=v1_cart1_mm_s --map v2=v2_cart2_mm_s``
   does), and, as a second protocol, on ``square_2V`` + ``sine_4Hz`` together (a stacked fit, see
   :func:`fit_stacked`: the library trains on one record only);
 * validate by free-run simulation from each record's start (the speed integrators use ``init: data``);

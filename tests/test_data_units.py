@@ -133,8 +133,8 @@ def test_the_python_api_reads_the_same(logs):
 
 
 @pytest.mark.parametrize("command", [
-    ["identify", "{data}", "--diagram", str(ENGINE)],
-    ["diagnose", "{data}", "--diagram", str(ENGINE)],
+    ["identify", str(ENGINE), "{data}"],
+    ["diagnose", str(ENGINE), "{data}"],
     ["simulate", str(ENGINE), "{data}"],
     ["compare", str(ENGINE), "{data}"],
     ["batch", str(ENGINE), "{data}", "-o", "{tmp}/fleet.csv"],

@@ -112,7 +112,7 @@ def files(tmp_path_factory, records):
 
 def test_cli_init_window_and_map_on_every_record(files):
     rep = files / "rep.json"
-    args = ["diagnose", str(files / "train_named.csv"), "--diagram", str(DATA / "one_mass.yaml"),
+    args = ["diagnose", str(DATA / "one_mass.yaml"), str(files / "train_named.csv"),
             "--validate", str(files / "val.csv"), "--map", "F=force", "--map", "v=speed", "--init-window", "10",
             "--effects", "damping", "--rounds", "0", "--report", str(rep), "--quiet"]
     res = CliRunner().invoke(main, args)
@@ -123,7 +123,7 @@ def test_cli_init_window_and_map_on_every_record(files):
     assert np.isfinite(val["validation_rms"]) and val["validation_initial_state"][0]["window"] == 10
     # without --map the validation record's columns are not found: one line, exit 1
     bare = [a for a in args if a not in ("--map", "F=force", "v=speed")]
-    bare[1] = str(files / "train.csv")
+    bare[2] = str(files / "train.csv")
     bare[bare.index("--report") + 1] = str(files / "rep2.json")
     res = CliRunner().invoke(main, bare)
     assert res.exit_code == 1 and "val.csv" in res.output and len(res.output.strip().splitlines()) == 1
@@ -137,7 +137,7 @@ def test_cli_init_window_needs_a_validation_record(files):
 
 def test_cli_refuses_an_unconverged_first_fit_in_one_line(files):
     rep = files / "unconverged.json"
-    res = CliRunner().invoke(main, ["diagnose", str(files / "train.csv"), "--diagram", str(DATA / "one_mass.yaml"),
+    res = CliRunner().invoke(main, ["diagnose", str(DATA / "one_mass.yaml"), str(files / "train.csv"),
                                     "--max-iter", "1", "--effects", "damping", "--report", str(rep), "--quiet"])
     assert res.exit_code == 1
     lines = [ln for ln in res.output.splitlines() if ln.strip()]

@@ -52,8 +52,8 @@ def test_no_matplotlib_is_one_line_naming_html_before_any_work(tmp_path, monkeyp
         raise SdnnError.at("PLOT001", f"{option} needs matplotlib, which is not installed", option)
 
     monkeypatch.setattr(plots, "require_matplotlib", missing)
-    for command in (["identify", str(ROOT / "examples/data/engine_idle.csv"), "--diagram", str(ENGINE)],
-                    ["diagnose", str(ROOT / "examples/data/engine_idle.csv"), "--diagram", str(ENGINE)]):
+    for command in (["identify", str(ENGINE), str(ROOT / "examples/data/engine_idle.csv")],
+                    ["diagnose", str(ENGINE), str(ROOT / "examples/data/engine_idle.csv")]):
         res = CliRunner().invoke(main, [*command, "-o", str(tmp_path / "out"), "--html", str(tmp_path / "r.html")])
         assert res.exit_code == 1
         assert res.stderr.startswith("--html: error[PLOT001] --html needs matplotlib"), res.stderr

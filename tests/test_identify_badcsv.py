@@ -81,7 +81,7 @@ def test_malformed_data_gives_one_line_and_leaves_no_file(case, tmp_path):
     data, chart, extra, code, line, column = case
     out = tmp_path / "out"
     out.mkdir()
-    res = CliRunner().invoke(main, ["identify", str(data), "--diagram", str(chart), "-o", str(out / "r.json"),
+    res = CliRunner().invoke(main, ["identify", str(chart), str(data), "-o", str(out / "r.json"),
                                     *extra], catch_exceptions=False)
     assert res.exit_code == 1, res.output
     lines = res.stderr.splitlines()
@@ -110,7 +110,7 @@ def test_at_least_twenty_cases_name_line_and_column():
 
 
 def test_a_bad_validation_file_is_named_and_nothing_is_written(tmp_path):
-    res = CliRunner().invoke(main, ["identify", str(BAD_ID / "good_small.csv"), "--diagram", str(ENGINE),
+    res = CliRunner().invoke(main, ["identify", str(ENGINE), str(BAD_ID / "good_small.csv"),
                                     "--validate", str(BAD_ID / "nan_in_output.csv"), "-o", str(tmp_path / "r.json")])
     assert res.exit_code == 1
     assert res.stderr.count("\n") == 1
@@ -121,7 +121,7 @@ def test_a_bad_validation_file_is_named_and_nothing_is_written(tmp_path):
 def test_a_bad_fix_from_file_is_named_and_nothing_is_written(tmp_path):
     not_a_result = tmp_path / "r0.json"
     not_a_result.write_text('{"format": "something else"}')
-    res = CliRunner().invoke(main, ["identify", str(BAD_ID / "good_small.csv"), "--diagram", str(ENGINE),
+    res = CliRunner().invoke(main, ["identify", str(ENGINE), str(BAD_ID / "good_small.csv"),
                                     "--fix-from", str(not_a_result), "-o", str(tmp_path / "r.json")])
     assert res.exit_code == 1
     assert res.stderr.count("\n") == 1 and "RES003" in res.stderr and str(not_a_result) in res.stderr

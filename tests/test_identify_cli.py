@@ -74,7 +74,7 @@ def engine_run(bench):
     """Stage 1 of the paper on the engine record, from Table 1's first start (J1 = 0.6)."""
     out = bench / "stage1"
     out.mkdir()
-    res = _identify(bench / "engine.csv", "--diagram", DIAGRAMS / "engine.yaml", "-o", out / "r.json", "--quiet")
+    res = _identify(DIAGRAMS / "engine.yaml", bench / "engine.csv", "-o", out / "r.json", "--quiet")
     assert res.exit_code == 0, res.output
     return out / "r.json"
 
@@ -132,7 +132,7 @@ def test_engine_identification_recovers_J1_from_both_table1_starts(bench, engine
         path = engine_run
     else:
         path = bench / "r_001.json"
-        res = _identify(bench / "engine.csv", "--diagram", bench / start, "-o", path, "--quiet", "--max-iter", "200")
+        res = _identify(bench / start, bench / "engine.csv", "-o", path, "--quiet", "--max-iter", "200")
         assert res.exit_code == 0, res.output
     r = _strict_json(path)
     assert r["parameters"]["J1"]["init"] == (0.6 if start == "engine.yaml" else 0.01)
@@ -146,7 +146,7 @@ def _metrics(y: np.ndarray, yhat: np.ndarray) -> tuple[float, float, float]:
 
 
 def test_cost_rms_and_fit_percent_match_a_numpy_recomputation(bench, tmp_path):
-    res = _identify(bench / "engine.csv", "--diagram", DIAGRAMS / "engine.yaml", "-o", tmp_path / "r.json",
+    res = _identify(DIAGRAMS / "engine.yaml", bench / "engine.csv", "-o", tmp_path / "r.json",
                "--validate", bench / "engine_val.csv", "--max-iter", "30", "--quiet")
     assert res.exit_code == 0, res.output
     r = _strict_json(tmp_path / "r.json")
@@ -168,7 +168,7 @@ def test_cost_rms_and_fit_percent_match_a_numpy_recomputation(bench, tmp_path):
 
 def test_fix_from_fixes_matching_parameters_and_curves(bench, engine_run, tmp_path):
     stage1 = _strict_json(engine_run)
-    res = _identify(bench / "two_mass.csv", "--diagram", bench / "two_mass_free.yaml", "--fix-from", engine_run,
+    res = _identify(bench / "two_mass_free.yaml", bench / "two_mass.csv", "--fix-from", engine_run,
                "-o", tmp_path / "r2.json", "--max-iter", "40", "--quiet")
     assert res.exit_code == 0, res.output
     r = _strict_json(tmp_path / "r2.json")
@@ -190,20 +190,20 @@ def test_fix_from_fixes_matching_parameters_and_curves(bench, engine_run, tmp_pa
 
 
 def test_split_and_validate_both_give_validation_metrics_but_not_together(bench, tmp_path):
-    res = _identify(bench / "engine.csv", "--diagram", DIAGRAMS / "engine.yaml", "-o", tmp_path / "s.json",
+    res = _identify(DIAGRAMS / "engine.yaml", bench / "engine.csv", "-o", tmp_path / "s.json",
                "--split", "0.7", "--max-iter", "15", "--quiet")
     assert res.exit_code == 0, res.output
     r = _strict_json(tmp_path / "s.json")
     assert r["fit"]["train"]["rows"] == 2100 - 1
     assert r["fit"]["validation"]["rows"] == 3000 - 2100
     assert r["fit"]["validation"]["rms"]["w1"] > 0 and r["settings"]["split"] == 0.7
-    res = _identify(bench / "engine.csv", "--diagram", DIAGRAMS / "engine.yaml", "-o", tmp_path / "v.json",
+    res = _identify(DIAGRAMS / "engine.yaml", bench / "engine.csv", "-o", tmp_path / "v.json",
                "--validate", bench / "engine_val.csv", "--max-iter", "15", "--quiet")
     assert res.exit_code == 0, res.output
     r = _strict_json(tmp_path / "v.json")
     assert r["fit"]["validation"]["rows"] == 2000 - 1
     assert r["data"]["validation"]["sha256"] == hashlib.sha256((bench / "engine_val.csv").read_bytes()).hexdigest()
-    res = _identify(bench / "engine.csv", "--diagram", DIAGRAMS / "engine.yaml", "-o", tmp_path / "both.json",
+    res = _identify(DIAGRAMS / "engine.yaml", bench / "engine.csv", "-o", tmp_path / "both.json",
                "--validate", bench / "engine_val.csv", "--split", "0.7")
     assert res.exit_code == 2
     assert not (tmp_path / "both.json").exists() and not (tmp_path / "both.chart.yaml").exists()
@@ -211,7 +211,7 @@ def test_split_and_validate_both_give_validation_metrics_but_not_together(bench,
 
 @pytest.mark.parametrize("extra", [["--max-iter", "15"], ["--starts", "3", "--seed", "5", "--max-iter", "8"]])
 def test_same_inputs_and_seed_give_byte_identical_files(bench, tmp_path, extra):
-    args = [bench / "engine.csv", "--diagram", DIAGRAMS / "engine.yaml", "-o", tmp_path / "r.json", "--quiet",
+    args = [DIAGRAMS / "engine.yaml", bench / "engine.csv", "-o", tmp_path / "r.json", "--quiet",
             *extra]
     assert _identify(*args).exit_code == 0
     first = (tmp_path / "r.json").read_bytes(), (tmp_path / "r.chart.yaml").read_bytes()
@@ -240,7 +240,7 @@ def test_no_command_writes_over_its_inputs_or_an_existing_output(bench, tmp_path
     ]
     (tmp_path / "sub").mkdir()
     for extra in cases:
-        res = _identify(data, "--diagram", chart, *extra, "--force")
+        res = _identify(chart, data, *extra, "--force")
         assert res.exit_code == 1, (extra, res.output)
         assert len(res.stderr.strip().splitlines()) == 1 and "OUT002" in res.stderr
     assert {p: p.read_bytes() for p in (data, chart)} == before
@@ -248,7 +248,7 @@ def test_no_command_writes_over_its_inputs_or_an_existing_output(bench, tmp_path
     for existing in ("r.json", "r.chart.yaml"):
         out = tmp_path / existing
         out.write_text("keep me\n")
-        res = _identify(data, "--diagram", chart, "-o", tmp_path / "r.json")
+        res = _identify(chart, data, "-o", tmp_path / "r.json")
         assert res.exit_code == 1 and "OUT003" in res.stderr and "--force" in res.stderr
         assert out.read_text() == "keep me\n"
         out.unlink()
@@ -257,8 +257,8 @@ def test_no_command_writes_over_its_inputs_or_an_existing_output(bench, tmp_path
 
 def test_real_subprocess_run_prints_the_table_and_writes_the_files(bench, tmp_path):
     out = tmp_path / "r.json"
-    proc = subprocess.run([sys.executable, "-m", "flowchart2sdnn", "identify", str(bench / "engine.csv"),
-                           "--diagram", str(DIAGRAMS / "engine.yaml"), "-o", str(out), "--max-iter", "10"],
+    proc = subprocess.run([sys.executable, "-m", "flowchart2sdnn", "identify", str(DIAGRAMS / "engine.yaml"),
+                           str(bench / "engine.csv"), "-o", str(out), "--max-iter", "10"],
                           capture_output=True, text=True, timeout=120, cwd=ROOT)
     assert proc.returncode == 0, proc.stderr
     assert "J1" in proc.stdout and "kg*m^2" in proc.stdout and "fit %" in proc.stdout

@@ -118,7 +118,7 @@ def test_a_start_that_makes_the_model_diverge_is_one_clear_line_and_no_file(data
     chart.write_text(text.replace("c:  {init: 100,", "c:  {init: 1000000,"))  # far beyond 4*J/T^2
     out = tmp_path / "out"
     out.mkdir()
-    res = _identify_cli(data / "two_mass.csv", "--diagram", chart, "-o", out / "r.json")
+    res = _identify_cli(chart, data / "two_mass.csv", "-o", out / "r.json")
     assert res.exit_code == 1
     assert res.stderr.count("\n") == 1 and res.stderr.startswith(f"{chart}: error[FIT001]")
     assert "init" in res.stderr
@@ -147,7 +147,7 @@ def test_data_too_large_to_square_is_one_line_naming_file_and_column(data, tmp_p
     write_csv(huge, {"time": rows[:, 0], "M1": rows[:, 1] * 1e200, "w1": rows[:, 2] * 1e200}, "%.17g")
     out = tmp_path / "out"
     out.mkdir()
-    res = _identify_cli(huge, "--diagram", DIAGRAMS / "engine.yaml", "-o", out / "r.json")
+    res = _identify_cli(DIAGRAMS / "engine.yaml", huge, "-o", out / "r.json")
     assert res.exit_code == 1 and res.stderr.count("\n") == 1
     assert res.stderr.startswith(f"{huge}: error[DATA002] column 'M1'")
     assert list(out.iterdir()) == []

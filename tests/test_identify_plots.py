@@ -42,7 +42,7 @@ def _png_size(data: bytes) -> tuple[int, int]:
 def test_plots_offline_are_written_as_pngs(engine_csv, tmp_path):
     pytest.importorskip("matplotlib")
     plots = tmp_path / "figs" / "run1"  # created, parents too
-    res = CliRunner().invoke(main, ["identify", str(engine_csv), "--diagram", str(DIAGRAMS / "engine.yaml"),
+    res = CliRunner().invoke(main, ["identify", str(DIAGRAMS / "engine.yaml"), str(engine_csv),
                                     "-o", str(tmp_path / "r.json"), "--plots", str(plots), "--max-iter", "20",
                                     "--quiet"], catch_exceptions=False)
     assert res.exit_code == 0, res.output
@@ -54,7 +54,7 @@ def test_plots_offline_are_written_as_pngs(engine_csv, tmp_path):
         assert width >= 400 and height >= 250
     # the same run again replaces the figures with identical bytes (no timestamps in the PNGs)
     before = {n: (plots / n).read_bytes() for n in names}
-    res = CliRunner().invoke(main, ["identify", str(engine_csv), "--diagram", str(DIAGRAMS / "engine.yaml"),
+    res = CliRunner().invoke(main, ["identify", str(DIAGRAMS / "engine.yaml"), str(engine_csv),
                                     "-o", str(tmp_path / "r.json"), "--plots", str(plots), "--max-iter", "20",
                                     "--quiet", "--force"], catch_exceptions=False)
     assert res.exit_code == 0
@@ -102,7 +102,7 @@ def test_without_matplotlib_plots_is_one_line_naming_the_extra(engine_csv, tmp_p
         return real_import(name, *args, **kwargs)
 
     monkeypatch.setattr(builtins, "__import__", no_matplotlib)
-    res = CliRunner().invoke(main, ["identify", str(engine_csv), "--diagram", str(DIAGRAMS / "engine.yaml"),
+    res = CliRunner().invoke(main, ["identify", str(DIAGRAMS / "engine.yaml"), str(engine_csv),
                                     "-o", str(tmp_path / "r.json"), "--plots", str(tmp_path / "p")])
     assert res.exit_code == 1
     assert res.stderr.count("\n") == 1 and "error[PLOT001]" in res.stderr
@@ -112,7 +112,7 @@ def test_without_matplotlib_plots_is_one_line_naming_the_extra(engine_csv, tmp_p
 
 def test_result_json_is_unchanged_by_plots(engine_csv, tmp_path):
     pytest.importorskip("matplotlib")
-    args = ["identify", str(engine_csv), "--diagram", str(DIAGRAMS / "engine.yaml"), "--max-iter", "5", "--quiet"]
+    args = ["identify", str(DIAGRAMS / "engine.yaml"), str(engine_csv), "--max-iter", "5", "--quiet"]
     assert CliRunner().invoke(main, [*args, "-o", str(tmp_path / "a.json")]).exit_code == 0
     assert CliRunner().invoke(main, [*args, "-o", str(tmp_path / "b.json"), "--plots", str(tmp_path / "p")]
                               ).exit_code == 0

@@ -126,7 +126,7 @@ def test_two_mass_mode_matches_the_hand_formula(identified):
     res = CliRunner().invoke(main, ["linearize", str(identified / "r.json"), "--at", "w1=5,w2=5",
                                     "--format", "json", "--control", str(identified / "ss.npz")])
     assert res.exit_code == 0, res.output
-    doc = json.loads(res.output)
+    doc = json.loads(res.stdout)  # stderr says what was written
     (mode,) = [p for p in doc["damp"] if p["damped_hz"] > 0]
     assert mode["wn"] == pytest.approx(wn, rel=0.01)
     assert mode["damped_hz"] == pytest.approx(wn * math.sqrt(1 - zeta**2) / (2 * math.pi), rel=0.01)

@@ -33,7 +33,7 @@ SHORTEN = [
     (r"--starts (4|16)", "--starts 2", 2),
     (r"--horizon 100", "--horizon 20", 1),
     (r"(python examples/make_fleet\.py tour/logs)", r"\1 --drives 2 --days 2 --seconds 1", 1),
-    (r"^(sdnn (?:identify tour/bench\S*|diagnose|batch) .*)$", r"\1 --max-iter 15", 5),
+    (r"^(sdnn (?:identify \S+ tour/bench\S*|diagnose|batch) .*)$", r"\1 --max-iter 15", 5),
     # 15 iterations stop short of convergence, which diagnose refuses to trace from: the shortened tour asks it to
     (r"^(sdnn diagnose .*)$", r"\1 --allow-unconverged", 1),
 ]

@@ -75,7 +75,7 @@ def _api(path):
 
 
 def _cli(path, *extra):
-    return CliRunner().invoke(main, ["identify", str(path), "--diagram", CHART, "--no-floor-bias", *extra])
+    return CliRunner().invoke(main, ["identify", CHART, str(path), "--no-floor-bias", *extra])
 
 
 @pytest.fixture(scope="module")
@@ -160,6 +160,6 @@ def test_a_held_input_fitted_right_raises_no_lag_zero_warning(clean):
 def test_diagnose_refuses_like_identify(files, case):
     with pytest.raises(SdnnError) as info:
         sd.diagnose(CHART, sd.read_csv(files[case]))
-    res = CliRunner().invoke(main, ["diagnose", str(files[case]), "--diagram", CHART])
+    res = CliRunner().invoke(main, ["diagnose", CHART, str(files[case])])
     assert res.exit_code == 1
     assert res.stderr.strip() == info.value.diagnostics[0].one_line()

@@ -3,7 +3,9 @@
 Layer rule: this package is the top layer, the only place that knows click, exit codes and terminal output;
 library modules never import it. :mod:`.main` holds the group and the small commands and registers the rest
 (:mod:`.identify`, :mod:`.diagnose`, :mod:`.batch`, :mod:`.report`); :mod:`.options` the options every command
-shares (each declared once), the error handling and the exit codes; :mod:`.terminal` progress and Ctrl-C.
+shares (each declared once), the error handling and the exit codes; :mod:`.order` the one argument order
+(``sdnn COMMAND CHART [DATA...]``) and the older spellings it still reads; :mod:`.help` ``--help`` in sections;
+:mod:`.terminal` progress and Ctrl-C.
 
 Exit codes: 0 success, 1 a user error (bad chart, bad data, failed run; one line on stderr), 2 bad usage.
 """

@@ -11,6 +11,7 @@ import os
 import click
 
 from ..errors import SdnnError
+from .help import SectionedCommand
 from .options import (
     alignment_option,
     column_reading,
@@ -25,6 +26,7 @@ from .options import (
     substeps_option,
     with_substeps,
 )
+from .order import chart_first
 from .terminal import BatchBar
 
 __all__ = ["batch", "expand_files"]
@@ -55,7 +57,9 @@ def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> li
     return list(out)
 
 
-@click.command(name="batch")
+@click.command(name="batch", cls=SectionedCommand,
+               short_help="Identify a chart on every log file of a fleet, resumably.",
+               sections={"Output": ("retry_errors", "diagnose")})
 @click.argument("chart", type=click.Path(dir_okay=False))
 @click.argument("data", nargs=-1, required=True)
 @click.option("-o", "--output", type=click.Path(dir_okay=False), default="results.csv", show_default=True,
@@ -76,7 +80,7 @@ def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> li
 @force_option("Start the results table over (it holds other settings).")
 @click.option("--diagnose", is_flag=True,
               help="Also diagnose each file; the effects it adds (e.g. friction) go to the 'effects' column.")
-@click.option("--quiet", is_flag=True, help="No progress bar and no summary.")
+@click.option("--quiet", is_flag=True, help="No progress bar, summary or 'wrote' line (errors still go to stderr).")
 @handle_errors
 def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_iter, alignment, substeps, shooting,
           mapping, units, retry_errors, force, diagnose, quiet) -> None:
@@ -91,6 +95,7 @@ def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_i
     from ..identify.document import fix_from_result
     from ..identify.run import IdentifySettings
 
+    chart, data = chart_first("sdnn batch CHART DATA...", chart, data)
     if workers and scheduler and scheduler != "local":
         raise click.UsageError("give either --workers or --scheduler ADDRESS (--workers sizes only 'local')")
     files = expand_files(data, exclude=(output, f"{output}.lock"))

@@ -10,6 +10,7 @@ import json
 import click
 
 from ..strictjson import strict_json
+from .help import SectionedCommand
 from .options import (
     alignment_option,
     column_reading,
@@ -19,11 +20,13 @@ from .options import (
     rows_option,
     windowed,
 )
+from .order import MODEL_SUFFIXES, chart_first
 
 __all__ = ["compare"]
 
 
-@click.command(name="compare")
+@click.command(name="compare", cls=SectionedCommand, sections={"Comparison": ("horizon",)},
+               short_help="Measured against model output: fit % and RMS per record.")
 @click.argument("model", type=click.Path(dir_okay=False))
 @click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
 @click.option("--horizon", type=click.IntRange(min=1),
@@ -53,6 +56,7 @@ def compare(model, data, horizon, output, chart, alignment, mapping, units, fmt,
     from ..network.runtime import CompiledNetwork
     from ..tables import table
 
+    model, data = chart_first("sdnn compare MODEL DATA...", model, data, MODEL_SUFFIXES)
     if output:
         from ..identify.plots import require_matplotlib
 
@@ -73,6 +77,8 @@ def compare(model, data, horizon, output, chart, alignment, mapping, units, fmt,
     if fmt == "json":
         click.echo(json.dumps(strict_json({"model": model, "horizon": horizon, "alignment": alignment,
                                            "records": rows}), indent=1))
+        if output:
+            click.echo(f"wrote {output}", err=True)  # stderr: stdout stays the JSON
     else:
         what = "free run" if horizon is None else f"{horizon}-step-ahead prediction"
         click.echo(f"{diagram.name}, {what}:")

@@ -11,6 +11,7 @@ import sys
 import click
 
 from ..strictjson import strict_json
+from .help import SectionedCommand
 from .options import (
     alignment_option,
     column_reading,
@@ -32,6 +33,7 @@ from .options import (
     with_intersample,
     with_substeps,
 )
+from .order import chart_and_data
 from .terminal import Progress
 
 __all__ = ["diagnose", "parse_effects"]
@@ -54,10 +56,17 @@ def _int_list(text: str) -> tuple[int, ...]:
     return values
 
 
-@click.command(name="diagnose")
-@click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
-@click.option("--diagram", "chart", required=True, type=click.Path(dir_okay=False),
-              help="The chart (YAML); it is never modified.")
+#: diagnose's own --help section: how the effects are searched and accepted
+EFFECTS = {"Effect search": ("rounds", "effect_names", "effects_file", "top", "second_look", "criterion", "min_gain",
+                             "spread_z", "alpha", "dead_time_max", "harmonics", "refit_iter", "horizon",
+                             "allow_unconverged")}
+
+
+@click.command(name="diagnose", cls=SectionedCommand, sections=EFFECTS,
+               short_help="Trace the residual to missing effects, add them, refit.")
+@click.argument("paths", nargs=-1, required=True, type=click.Path(dir_okay=False), metavar="CHART DATA...")
+@click.option("--diagram", "diagram", type=click.Path(dir_okay=False),
+              help="The chart, in the old order DATA... --diagram CHART (still read, with a note).")
 @click.option("--validate", "validation", multiple=True, type=click.Path(dir_okay=False),
               help="Validation record (CSV); repeatable (e.g. several short records of a chaotic drive).")
 @click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
@@ -115,14 +124,14 @@ def _int_list(text: str) -> tuple[int, ...]:
 @seed_option("Seed for initial curves.")
 @html_option()
 @force_option()
-@click.option("--quiet", is_flag=True, help="No progress and no report text.")
+@click.option("--quiet", is_flag=True, help="No progress, report text or 'wrote' lines (errors still go to stderr).")
 @executor_options("the candidate refits")
 @handle_errors
-def diagnose(data, chart, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
+def diagnose(paths, diagram, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
              refit_iter, max_iter, horizon, top, second_look, criterion, min_gain, spread_z, alpha, dead_time_max, harmonics, init_window,
              shooting, allow_unconverged, alignment, substeps, intersample, mapping, units, delimiter, decimal, resample, seed, html_path, force, quiet, workers=None, scheduler=None) -> None:
-    """Trace the residual of the chart on DATA (one or more CSV records) to missing effects, add them to the
-    chart, refit, and report the error before and after."""
+    """Trace the residual of CHART (YAML; never modified) on DATA (one or more CSV records) to missing effects,
+    add them to the chart, refit, and report the error before and after."""
     from ..atomic import atomic_write_text, check_output_path
     from ..data.timebase import record_notes
     from ..diagnose.effects import effect_library, select_effects
@@ -132,6 +141,7 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     from ..diagram.dump import dump_diagram
     from ..diagram.validate import load_diagram
 
+    chart, data = chart_and_data("diagnose", paths, diagram)
     if validation and split:
         raise click.UsageError("give either --validate or --split, not both")
     if init_window and not validation:

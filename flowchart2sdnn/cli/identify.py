@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from .help import SectionedCommand
 from .options import (
     alignment_option,
     column_reading,
@@ -31,14 +32,17 @@ from .options import (
     with_intersample,
     with_substeps,
 )
+from .order import chart_and_data
 from .terminal import CtrlC, Progress
 
 __all__ = ["identify"]
 
 
-@click.command(name="identify")
-@click.argument("data", nargs=-1, required=True, type=click.Path(dir_okay=False))
-@click.option("--diagram", "chart", required=True, type=click.Path(dir_okay=False), help="The chart (YAML).")
+@click.command(name="identify", cls=SectionedCommand,
+               short_help="Identify a chart's parameters and learned curves from records.")
+@click.argument("paths", nargs=-1, required=True, type=click.Path(dir_okay=False), metavar="CHART DATA...")
+@click.option("--diagram", "diagram", type=click.Path(dir_okay=False),
+              help="The chart, in the old order DATA... --diagram CHART (still read, with a note).")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="RESULT.json; the identified chart is written beside it as RESULT.chart.yaml.")
 @click.option("--fix-from", type=click.Path(dir_okay=False),
@@ -49,30 +53,25 @@ __all__ = ["identify"]
                    "run free; scored from row N (EMPS: 20, CED: 4, Cascaded Tanks: 5).")
 @shooting_option()
 @click.option("--shooting-starts", type=click.Choice(["auto", "data", "free"]), default="auto", show_default=True,
-              help="Multiple shooting: measured states start each segment from the data's sample ('data') or are "
-                   "fitted like the unmeasured ones from it ('free': a noisy sample is a poor start); 'auto': "
-                   "free where --shooting auto found the records chaotic, data otherwise.")
+              help="Multiple shooting: measured states start each segment at the data's sample ('data') or are "
+                   "fitted from it ('free'); 'auto': free where --shooting auto found the records chaotic.")
 @click.option("--threads", type=click.IntRange(min=1), default=1, show_default=True,
-              help="Multiple shooting: run the segments of a fit on N threads in this process (same result as 1; "
-                   "pays from segments of ~500 samples on, benchmarks/bench_shooting_iteration.py).")
+              help="Multiple shooting: the segments of a fit on N threads (same result; pays from segments of "
+                   "~500 samples).")
 @click.option("--floor-bias/--no-floor-bias", default=True, show_default=True,
-              help="Estimate the discretization's bias beta on each parameter (the network refitted to the "
-                   "continuous oracle's noise-free run of the identified chart), widen each 95 % interval by "
-                   "|beta| (the noise's alone: ci95_noise) and report the corrected values (RESULT.json "
-                   "discretization.bias). Offline fits only (--online skips it).")
+              help="Estimate the discretization's bias on each parameter (a refit to the continuous chart's "
+                   "noise-free run), widen the 95 % intervals by it and report corrected values (RESULT.json "
+                   "discretization.bias). Offline fits only.")
 @click.option("--curve-start", type=click.Choice(["stick", "random"]), default="stick", show_default=True,
-              help="Where learned curves without stored weights start: 'stick', for a curve in a feedback loop a "
-                   "stick-slip step at 0.3 of the slope the network's step allows, set after brief fits (at most "
-                   "150 iterations; docs/rough_init.md); 'random', the chart's seeded init_range weights. Offline fits only.")
+              help="Where learned curves without stored weights start: 'stick', a stick-slip step set by brief "
+                   "fits; 'random', the chart's seeded init_range weights (docs/rough_init.md). Offline fits only.")
 @click.option("--lm-steps", type=click.Choice(["geodesic", "plain"]), default="geodesic", show_default=True,
-              help="LM steps of offline fits: 'geodesic', bent along the cost's valley (geodesic acceleration, one "
-                   "extra simulation per step); 'plain', the unbent steps (docs/rough_init.md). Used where the "
-                   "bounds are kept by the transform (--lm-bounds).")
+              help="LM steps where the transform keeps the bounds: 'geodesic', bent along the cost's valley (one "
+                   "extra simulation per step); 'plain', unbent (docs/rough_init.md).")
 @click.option("--lm-bounds", type=click.Choice(["auto", "transform", "box"]), default="auto", show_default=True,
-              help="How offline fits keep the parameters' bounds: 'box', plain steps in the physical quantities "
-                   "held inside them, each step's length set by a trust radius (as scipy's trf); 'transform', a "
-                   "change of variables with --lm-steps; 'auto', box where no learned curve is fitted, the "
-                   "transform elsewhere (docs/rough_init.md).")
+              help="How offline fits keep the bounds: 'box', steps in the physical quantities with a trust radius "
+                   "(as scipy's trf); 'transform', a change of variables; 'auto', box unless a learned curve is "
+                   "fitted (docs/rough_init.md).")
 @click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
               help="Train on this leading fraction of DATA, validate on the rest.")
 @click.option("--starts", type=click.IntRange(min=1), default=1, show_default=True,
@@ -98,13 +97,14 @@ __all__ = ["identify"]
                    "Needs matplotlib: pip install flowchart2sdnn[plots].")
 @html_option()
 @force_option()
-@click.option("--quiet", is_flag=True, help="No progress and no table.")
+@click.option("--quiet", is_flag=True,
+              help="No progress, table or 'wrote' lines (errors and the not-converged warning still go to stderr).")
 @executor_options("the multi-start fits")
 @handle_errors
-def identify(data, chart, output, fix_from, validation, init_window, shooting, shooting_starts, threads, floor_bias, curve_start, lm_steps, lm_bounds, split, starts, seed, online, window, average,
+def identify(paths, diagram, output, fix_from, validation, init_window, shooting, shooting_starts, threads, floor_bias, curve_start, lm_steps, lm_bounds, split, starts, seed, online, window, average,
              max_iter, alignment, substeps, intersample, mapping, units, delimiter, decimal, resample, plots, html_path, force,
              quiet, workers=None, scheduler=None) -> None:
-    """Identify the physical parameters of the chart from measured DATA (CSV; several records are fitted
+    """Identify the physical parameters of CHART (YAML) from measured DATA (CSV; several records are fitted
     together, each simulated from its own initial state)."""
     from ..api import with_data_notes
     from ..atomic import atomic_write_text, check_output_path
@@ -118,6 +118,7 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
     from ..identify.settings import IDENTIFY_GEODESIC
     from ..identify.summary import format_result
 
+    chart, data = chart_and_data("identify", paths, diagram)
     if validation and split:
         raise click.UsageError("give either --validate or --split, not both")
     if init_window and not validation:
@@ -182,10 +183,11 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
             n = max(3, int(round(split * train[0].n_rows)))
             records = [(records[0][0], train[0].slice(0, n), 0)]
             checks = [(f"validation: {Path(train[0].path).name} after the split", train[0], n)]
+    figures = []
     if plots:
         from ..identify.plots import write_plots
 
-        write_plots(outcome, plots, records, checks)
+        figures = write_plots(outcome, plots, records, checks)
     if html_path:
         from ..identify.html import identification_html, write_html
 
@@ -197,8 +199,15 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
             click.echo(f"wrote {output} and {chart_out}")
         if html_path:
             click.echo(f"wrote {html_path}")
+        if plots:
+            click.echo(f"wrote {len(figures)} figure(s) to {plots}")
     if outcome.converged is False and outcome.status != "interrupted":
-        click.echo(f"warning: not converged: {outcome.message} (raise --max-iter, or start closer)", err=True)
+        from ..fit.stoprule import stop_rule
+
+        rule = stop_rule(outcome.status, outcome.message)  # the one rule that ended it, not the whole message
+        why = f"{rule.sentence} (after {rule.iterations} iteration{'s' * (rule.iterations != 1)})" if rule \
+            else outcome.message
+        click.echo(f"warning: not converged: {why}; raise --max-iter, or start closer", err=True)
     if outcome.status == "interrupted":
         click.echo(f"interrupted: {'the best result so far is in ' + output if output else 'no -o, nothing written'}",
                    err=True)

@@ -11,7 +11,9 @@ import json
 import click
 
 from ..strictjson import strict_json
+from .help import SectionedCommand
 from .options import column_reading, data_options, force_option, handle_errors, rows_option, windowed
+from .order import MODEL_SUFFIXES, chart_first
 
 __all__ = ["linearize"]
 
@@ -22,7 +24,9 @@ def _matrix(name: str, m, rows, cols) -> str:
     return f"{name}:\n" + table([""] + list(cols), [[r, *map(float, line)] for r, line in zip(rows, m, strict=True)])
 
 
-@click.command(name="linearize")
+@click.command(name="linearize", cls=SectionedCommand,
+               short_help="Linear model at an operating point: poles, damping, Bode.",
+               sections={"Operating point": ("at", "kink"), "Output": ("control_path", "bode")})
 @click.argument("model", type=click.Path(dir_okay=False))
 @click.argument("data", nargs=-1, type=click.Path(dir_okay=False))
 @click.option("--at", "at", multiple=True, metavar="NAME=VALUE,...",
@@ -50,6 +54,7 @@ def linearize(model, data, at, kink, control_path, bode, chart, mapping, units, 
     from ..identify.document import read_model
     from ..tables import table
 
+    model, data = chart_first("sdnn linearize MODEL DATA...", model, data, MODEL_SUFFIXES)
     if data and not bode:
         raise click.UsageError("DATA is only read for --bode (the measured frequency response)")
     if bode:
@@ -108,5 +113,5 @@ def linearize(model, data, at, kink, control_path, bode, chart, mapping, units, 
         click.echo("poles:\n" + table(["pole (1/s)", "wn (rad/s)", "f (Hz)", "damping ratio", "damped f (Hz)"],
                                       rows), nl=False)
     for path in (control_path, bode):
-        if path and fmt == "text":
-            click.echo(f"wrote {path}")
+        if path:
+            click.echo(f"wrote {path}", err=fmt == "json")  # with --format json stdout stays the JSON

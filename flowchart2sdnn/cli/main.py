@@ -19,6 +19,7 @@ from ..errors import SdnnError
 from .batch import batch
 from .compare import compare
 from .diagnose import diagnose
+from .help import SectionedCommand, WorkflowGroup
 from .identify import identify
 from .linearize import linearize
 from .options import (
@@ -34,19 +35,28 @@ from .options import (
     windowed,
     with_substeps,
 )
+from .order import chart_first
 from .report import report
 
 __all__ = ["main"]
 
 
-@click.group(context_settings={"help_option_names": ["-h", "--help"]})
+#: `sdnn --help` lists the commands as a first session uses them
+WORKFLOW = ("lint", "compile", "excite", "simulate", "identify", "compare", "linearize", "diagnose", "batch", "report")
+
+
+@click.group(cls=WorkflowGroup, order=WORKFLOW,
+             context_settings={"help_option_names": ["-h", "--help"], "max_content_width": 100},
+             epilog="Every command reads the chart (or model) first, then the data: sdnn COMMAND CHART [DATA...]. "
+                    "sdnn COMMAND --help lists its options.")
 @click.version_option(__version__, prog_name="sdnn")
 def main() -> None:
     """Grey-box identification of mechatronic systems from a YAML signal flow chart."""
 
 
 # ------------------------------------------------------------------------------------------------ lint
-@main.command()
+@main.command(cls=SectionedCommand,
+              short_help="Check a chart: loops, signals, units, bounds, identifiability.")
 @click.argument("chart", type=click.Path(dir_okay=False))
 @click.option("--format", "fmt", type=click.Choice(["text", "json"]), default="text", show_default=True)
 @handle_errors
@@ -72,7 +82,8 @@ def lint(chart: str, fmt: str) -> None:
 
 
 # ------------------------------------------------------------------------------------------------ compile
-@main.command(name="compile")
+@main.command(name="compile", cls=SectionedCommand, sections={"Output": ("dot", "svg", "explain")},
+              short_help="Build a chart's network; explain it as equations, or draw it.")
 @click.argument("chart", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", type=click.Path(dir_okay=False), help="Write the network file (JSON).")
 @click.option("--explain", is_flag=True, help="Print every weight as an equation and every delayed edge.")
@@ -116,7 +127,9 @@ def compile_(chart: str, output: str | None, explain: bool, dot: str | None, svg
 
 
 # ------------------------------------------------------------------------------------------------ simulate
-@main.command()
+@main.command(cls=SectionedCommand,
+              sections={"Data and chart": ("params",), "Simulation": ("continuous", "signals")},
+              short_help="Run a chart on a record's inputs (network or continuous).")
 @click.argument("chart", type=click.Path(dir_okay=False))
 @click.argument("data", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", type=click.Path(dir_okay=False), help="Output CSV (default: stdout).")
@@ -138,6 +151,7 @@ def simulate(chart, data, output, params, continuous, signals, alignment, subste
     from ..diagram.validate import load_diagram
     from ..simulate.run import simulate_chart, simulation_columns
 
+    chart, (data,) = chart_first("sdnn simulate CHART DATA", chart, (data,))
     if output:
         check_output_path(output, [chart, data] + ([params] if params else []), force=force)
     diagram = with_substeps(load_diagram(chart), substeps)
@@ -160,7 +174,12 @@ def simulate(chart, data, output, params, continuous, signals, alignment, subste
 
 
 # ------------------------------------------------------------------------------------------------ excite
-@main.command()
+EXCITATION = {"Excitation": ("seconds", "input_name", "amplitude", "hold", "relay_level", "relay_switch", "relay_band",
+                             "relay_band_scale", "speed", "noise_std")}
+
+
+@main.command(cls=SectionedCommand, sections=EXCITATION,
+              short_help="Virtual test bench: simulate a plant chart under excitation.")
 @click.argument("plant", type=click.Path(dir_okay=False))
 @click.option("--seconds", type=click.FloatRange(min=0, min_open=True), required=True)
 @seed_option()

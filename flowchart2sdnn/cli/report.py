@@ -8,12 +8,15 @@ from __future__ import annotations
 
 import click
 
+from .help import SectionedCommand
 from .options import handle_errors
 
 __all__ = ["report"]
 
 
-@click.command(name="report")
+@click.command(name="report", cls=SectionedCommand,
+               short_help="Each parameter of a batch table over time; the drifting drives.",
+               sections={"Drift": ("group", "threshold", "t_min", "ci_factor")})
 @click.argument("results", type=click.Path(dir_okay=False))
 @click.option("-o", "--output", "directory", type=click.Path(file_okay=False), required=True,
               help="Directory for the plots, drift.csv and report.md (created if needed).")

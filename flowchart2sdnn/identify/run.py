@@ -431,13 +431,26 @@ def _second_look(problem: Problem, x0, lower, upper, settings: IdentifySettings,
     return (again, again_settings, auto) if better else (out, settings, auto)
 
 
+def iteration_text(it: int, cost: float, before: float = math.nan) -> str:
+    """The progress line of an LM iteration: its number, the cost, and the cost's fall since `before` (the
+    cost last reported) in percent, e.g. ``LM iteration 12: cost 3.410e-02, -12 %``."""
+    text = f"LM iteration {it}: cost {cost:.3e}"
+    if math.isfinite(before) and before > 0:
+        text += f", {100 * (cost - before) / before:+.2g} %"
+    return text
+
+
 def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, progress, stop, executor) -> _Outcome:
     options = lm_options(settings, problem)
     shooting = 0 if settings.shooting == "off" else settings.shooting
 
+    last = [0, math.nan]  # the iteration and cost reported last: the line shows the cost's fall since then
+
     def callback(it, x, cost, mu):
         if progress:
-            progress(f"LM iteration {it}, cost {cost:.6g}, mu {mu:.1e}", min(1.0, it / max(1, settings.max_iter)))
+            before = last[1] if it > last[0] else math.nan  # a lower count: the next start (or fit) began
+            last[:] = [it, cost]
+            progress(iteration_text(it, cost, before), None)  # no fraction: max_iter is a limit, not the goal
         return bool(stop and stop())
 
     warm = None

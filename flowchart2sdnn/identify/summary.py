@@ -4,6 +4,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from ..fit.stoprule import status_line
 from ..tables import table
 from .result import Identification
 
@@ -16,7 +17,7 @@ def _g(x) -> str:
 
 def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str:
     """The parameter table, learned curves, fit table, multi-start line and warnings, as text."""
-    out = [f"status: {result.status}" + (f" - {result.message}" if result.message else "")]
+    out = [status_line(result.status, result.message, result.converged)]  # the stop rule that fired, by name
     rows = []
     for name, p in result.parameters.items():
         ci = f"[{_g(p.ci95[0])}, {_g(p.ci95[1])}]" if p.ci95 else ""
