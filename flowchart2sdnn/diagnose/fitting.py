@@ -208,14 +208,45 @@ def _validate(ident: Identification, records: Sequence[tuple[Dataset, int]], ali
 
 
 def fit_chart(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int,
-              extra_dof: int, start: str, progress: Progress | None = None, accepted: tuple = ()) -> Fitted:
-    """Fit `diagram` on the training records and score it on the validation `records` ((Dataset, first row))."""
-    return _fitted(_identify(diagram, train, settings, max_iter, progress), records, settings, extra_dof, start,
-                   accepted)
+              extra_dof: int, start: str, progress: Progress | None = None, accepted: tuple = (),
+              target: float = math.inf) -> Fitted:
+    """Fit `diagram` on the training records and score it on the validation `records` ((Dataset, first row)).
+    A finite `target` cuts the fit off once it can no longer reach that training cost (:func:`behind`)."""
+    cutoff = behind(target, max_iter) if math.isfinite(target) else None
+    return _fitted(_identify(diagram, train, settings, max_iter, progress, cutoff), records, settings, extra_dof,
+                   start, accepted)
+
+
+#: a brief refit is cut off (:func:`behind`) only after this many iterations: its pace is the mean fall of the
+#: last CUTOFF_PACE iterations
+CUTOFF_PACE = 3
+
+
+def behind(target: float, max_iter: int):
+    """``cutoff(iteration, cost)`` for identify: a reason once the cost, falling at the pace of its last
+    CUTOFF_PACE iterations for every iteration left, would still end above `target` (the lowest training cost a
+    refit of the round reached).
+
+    Why this bound: Levenberg-Marquardt's gains shrink as a fit nears its minimum, so the recent pace carried over
+    the whole remaining budget over-estimates what is left; a refit that cannot reach the round's best even so
+    cannot take first place on training cost, and its validation RMS is still measured where it stopped."""
+    costs: list[float] = []
+
+    def cutoff(it: int, cost: float) -> str | None:
+        costs.append(cost)
+        if len(costs) <= CUTOFF_PACE:
+            return None
+        pace = max(costs[-1 - CUTOFF_PACE] - cost, 0.0) / CUTOFF_PACE
+        reach = cost - pace * max(max_iter - it, 0)
+        if reach > target:
+            return (f"at iteration {it} the cost {cost:.6g} falls {pace:.3g} an iteration; over the {max_iter - it} "
+                    f"left it cannot reach {target:.6g}, the round's best refit")
+        return None
+    return cutoff
 
 
 def _identify(diagram: Diagram, train: list[Dataset], settings: DiagnoseSettings, max_iter: int,
-              progress: Progress | None = None) -> Identification:
+              progress: Progress | None = None, cutoff=None) -> Identification:
     # floor_bias off: diagnose compares costs and validation RMS, never the intervals, over many refits
     full = max_iter >= settings.max_iter
     # trainlm's damping and the bound transform: diagnose's decisions were measured with them (identify.settings.
@@ -226,7 +257,7 @@ def _identify(diagram: Diagram, train: list[Dataset], settings: DiagnoseSettings
     s = IdentifySettings(max_iter=max_iter, seed=settings.seed, alignment=settings.alignment, lm_tau=settings.lm_tau,
                          floor_bias=False, shooting=settings.shooting if full else "off", lm_damping="trainlm",
                          lm_bounds="transform")
-    return identify(diagram, train if len(train) > 1 else train[0], None, s, progress)
+    return identify(diagram, train if len(train) > 1 else train[0], None, s, progress, cutoff=cutoff)
 
 
 def _fitted(ident: Identification, records, settings: DiagnoseSettings, extra_dof: int, start: str,
@@ -271,7 +302,7 @@ def horizons(train: Sequence[Dataset], first: int) -> list[int]:
 
 
 def fit_growing(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int,
-                 extra_dof: int, start: str, accepted: tuple = ()) -> Fitted:
+                 extra_dof: int, start: str, accepted: tuple = (), target: float = math.inf) -> Fitted:
     """:func:`fit_chart` on the leading parts of the training records (``settings.horizon`` samples, then 4x longer),
     each stage from the last one's fit, and finally on the whole records."""
     for h in horizons(train, settings.horizon):
@@ -285,7 +316,7 @@ def fit_growing(diagram: Diagram, train: list[Dataset], records, settings: Diagn
         if cost is None or not math.isfinite(cost):
             break  # diverged on a short stage: continue from where it was
         diagram = ident.diagram
-    return fit_chart(diagram, train, records, settings, max_iter, extra_dof, start, None, accepted)
+    return fit_chart(diagram, train, records, settings, max_iter, extra_dof, start, None, accepted, target)
 
 
 def unpredictable(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> bool:

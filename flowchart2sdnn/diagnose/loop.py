@@ -484,19 +484,23 @@ GROW_ALWAYS, GROW_IF_UNPREDICTABLE = "always", "if_unpredictable"
 
 
 def refit_unit(unit: tuple) -> tuple[Fitted | None, float]:
-    """One brief refit: (chart, train, records, settings, max_iter, dof, start, accepted[, grow]) -> (Fitted or
-    None, seconds). From the chart as given (start "nominal", or the control's "control_nominal") also with a
-    growing horizon (``settings.horizon``) - always, or with `grow` GROW_IF_UNPREDICTABLE only when the plain
-    refit is unpredictable (:func:`~.fitting.unpredictable`) - keeping the lower training cost (its start then
-    reads "horizon", "control_horizon"). Module level, so that any executor's worker can run it."""
+    """One brief refit: (chart, train, records, settings, max_iter, dof, start, accepted[, grow[, target]]) ->
+    (Fitted or None, seconds). From the chart as given (start "nominal", or the control's "control_nominal")
+    also with a growing horizon (``settings.horizon``) - always, or with `grow` GROW_IF_UNPREDICTABLE only when
+    the plain refit is unpredictable (:func:`~.fitting.unpredictable`) - keeping the lower training cost (its
+    start then reads "horizon", "control_horizon"). A finite `target` (the lowest training cost a refit of the
+    round reached) cuts a fit off once it cannot reach it (:func:`~.fitting.behind`). Module level, so that any
+    executor's worker can run it."""
     chart, train, records, settings, max_iter, dof, start, acc, *rest = unit
     grow = rest[0] if rest else GROW_ALWAYS
+    target = rest[1] if len(rest) > 1 else math.inf
     t0 = time.perf_counter()
     try:
-        fitted = fit_chart(chart, train, records, settings, max_iter, dof, start, None, acc)
+        fitted = fit_chart(chart, train, records, settings, max_iter, dof, start, None, acc, target)
         if (start in _HORIZON_STARTS and settings.horizon > 0 and not _was_interrupted(fitted)
                 and (grow == GROW_ALWAYS or unpredictable(fitted, train, settings))):
-            grown = fit_growing(chart, train, records, settings, max_iter, dof, _HORIZON_STARTS[start], acc)
+            grown = fit_growing(chart, train, records, settings, max_iter, dof, _HORIZON_STARTS[start], acc,
+                                min(target, fitted.cost))
             if _was_interrupted(grown) or grown.cost < fitted.cost:
                 fitted = grown
     except (SdnnError, ValueError, KeyError):
@@ -519,8 +523,11 @@ def _control(current: Fitted, nominal_chart: Diagram, train: list[Dataset], reco
     that start stayed at 0.382 (false-alarm bench, physical two-mass chart, seed 2; docs/diagnose.md)."""
     acc = tuple(a["effect"] + "@" + a["at"] for a in accepted)
     grow = GROW_ALWAYS if horizon else GROW_IF_UNPREDICTABLE
-    units = [(current.diagram, train, records, settings, settings.refit_iter, extra_dof, "control", acc),
-             (nominal_chart, train, records, settings, settings.refit_iter, extra_dof, "control_nominal", acc, grow)]
+    # the control matters only where it goes below the current fit's cost: cut off where it cannot
+    units = [(current.diagram, train, records, settings, settings.refit_iter, extra_dof, "control", acc, grow,
+              current.cost),
+             (nominal_chart, train, records, settings, settings.refit_iter, extra_dof, "control_nominal", acc, grow,
+              current.cost)]
     results = map(refit_unit, units) if executor is None else executor.map(refit_unit, units)
     best = None
     for fitted, _sec in results:
@@ -569,18 +576,25 @@ def _refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Dataset],
             except (SdnnError, ValueError, KeyError):
                 continue
             owner.append(i)
-    results = map(refit_unit, units) if executor is None else executor.map(refit_unit, units)
     chosen: list[Fitted | None] = [None] * len(best)
     seconds = [0.0] * len(best)
-    done = 0
-    for i, (fitted, sec) in zip(owner, results, strict=True):
-        done += 1
-        say(f"refit {best[i].candidate.title()} ({done}/{len(units)})")
-        seconds[i] += sec
-        if _was_interrupted(fitted):
-            yield best[i], fitted, seconds[i]
-            return
-        if fitted is not None and (chosen[i] is None or fitted.cost < chosen[i].cost):
-            chosen[i] = fitted
+    # candidate by candidate, best score first, both starts of one candidate together (the executor's work), each
+    # cut off at the lowest cost a refit before it reached (fitting.behind): a refit that cannot reach the round's
+    # best stops after a few iterations. The waves do not depend on the executor, so neither do the results.
+    leader, done = math.inf, 0
+    for i in dict.fromkeys(owner):
+        batch = [(*u, leader) for u, o in zip(units, owner, strict=True) if o == i]
+        results = map(refit_unit, batch) if executor is None else executor.map(refit_unit, batch)
+        for fitted, sec in results:
+            done += 1
+            say(f"refit {best[i].candidate.title()} ({done}/{len(units)})")
+            seconds[i] += sec
+            if _was_interrupted(fitted):
+                yield best[i], fitted, seconds[i]
+                return
+            if fitted is not None and (chosen[i] is None or fitted.cost < chosen[i].cost):
+                chosen[i] = fitted
+            if fitted is not None and math.isfinite(fitted.cost):
+                leader = min(leader, fitted.cost)
     for i, s in enumerate(best):
         yield s, chosen[i], seconds[i]

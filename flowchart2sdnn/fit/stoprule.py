@@ -30,6 +30,7 @@ _ONE_RULE = {
                                      "cost"),
     "small_step": ("min_rel_step", "the step fell below min_rel_step of the parameters"),
     "callback_stop": ("stop", "stopped on request"),
+    "cut_off": ("cutoff", "cut off: at its pace it could no longer reach the best refit of its round"),
     "interrupted": ("stop", "interrupted; the best point so far is kept"),
 }
 

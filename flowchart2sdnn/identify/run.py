@@ -94,7 +94,8 @@ class _Outcome:
 def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: Dataset | None = None,
              settings: IdentifySettings | None = None,
              progress: Callable[[str, float | None], None] | None = None,
-             executor=None, stop: Callable[[], bool] | None = None, **options) -> Identification:
+             executor=None, stop: Callable[[], bool] | None = None,
+             cutoff: Callable[[int, float], str | None] | None = None, **options) -> Identification:
     """Identify the chart's free quantities from `train`; see the module docstring.
 
     Settings come as an :class:`IdentifySettings` or as its fields by name (``starts=4, max_iter=300``; those
@@ -104,6 +105,9 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     processes or on a Dask cluster; the result is the same as without it (progress then comes per start).
     `stop` (optional) is polled after each LM iteration, start and online chunk; when it returns True the
     run ends early with status "interrupted" and the best point so far (the CLI's Ctrl-C).
+    `cutoff` (optional, offline fits) is called as ``cutoff(iteration, cost)`` after each LM iteration; when it
+    returns a reason the fit ends there with status "cut_off" and that reason as its message (diagnose's brief
+    refits that can no longer reach the round's best).
     Several training records (a sequence) are fitted together, each simulated from its own initial state.
     """
     settings = settings or IdentifySettings()
@@ -147,7 +151,10 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     elif settings.online:
         out = _online(problem, x0, lower, upper, settings, progress, stop, executor)
     else:
-        out = _offline(problem, x0, lower, upper, settings, progress, stop, executor)
+        cut: list[str] = []
+        out = _offline(problem, x0, lower, upper, settings, progress, stop, executor, _recording(cutoff, cut))
+        if cut:
+            out = replace(out, status="cut_off", message=f"cut off: {cut[0]}", interrupted=False)
         if auto is not None and out.lm is not None and not out.interrupted:
             out, settings, auto = _second_look(problem, x0, lower, upper, settings, starts, auto, out, progress,
                                                stop, executor)
@@ -440,7 +447,21 @@ def iteration_text(it: int, cost: float, before: float = math.nan) -> str:
     return text
 
 
-def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, progress, stop, executor) -> _Outcome:
+def _recording(cutoff, reasons: list[str]):
+    """`cutoff` that also keeps the reason it gave in `reasons` (how identify tells a cut-off from Ctrl-C)."""
+    if cutoff is None:
+        return None
+
+    def check(it: int, cost: float) -> bool:
+        why = cutoff(it, cost)
+        if why:
+            reasons.append(why)
+        return bool(why)
+    return check
+
+
+def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, progress, stop, executor,
+             cutoff=None) -> _Outcome:
     options = lm_options(settings, problem)
     shooting = 0 if settings.shooting == "off" else settings.shooting
 
@@ -451,6 +472,8 @@ def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, pro
             before = last[1] if it > last[0] else math.nan  # a lower count: the next start (or fit) began
             last[:] = [it, cost]
             progress(iteration_text(it, cost, before), None)  # no fraction: max_iter is a limit, not the goal
+        if cutoff is not None and cutoff(it, cost):
+            return True
         return bool(stop and stop())
 
     warm = None
