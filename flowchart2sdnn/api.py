@@ -17,6 +17,7 @@ from __future__ import annotations
 import csv
 import hashlib
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -173,9 +174,7 @@ def diagnose(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset],
     val = [p for d in validation for p in conform(d, diagram.sample_time, resample)]
     out = _diagnose(diagram, train, tuple(val), DiagnoseSettings(**settings))
     notes = record_notes([*train, *val])
-    if notes:
-        out.report["data_notes"] = list(notes)
-    return out
+    return replace(out, data_notes=tuple(notes)) if notes else out
 
 
 def prepared(diagram: Diagram, data: Dataset | Sequence[Dataset], validation: Dataset | None,
@@ -193,8 +192,6 @@ def prepared(diagram: Diagram, data: Dataset | Sequence[Dataset], validation: Da
 def with_data_notes(ident: Identification, records: Sequence[Dataset]) -> Identification:
     """`ident` with the records' data notes (time base, delimiter) before its own warnings, and after them the
     warning of a residual that follows a held input at lag 0 (identify.lagzero)."""
-    from dataclasses import replace
-
     from .data.timebase import record_notes
     from .identify.lagzero import lag_zero_warnings
 

@@ -5,12 +5,11 @@ Layer: cli (the rule is in the package docstring).
 
 from __future__ import annotations
 
-import json
 import sys
+from dataclasses import replace
 
 import click
 
-from ..strictjson import strict_json
 from .options import (
     alignment_option,
     column_reading,
@@ -125,6 +124,7 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     chart, refit, and report the error before and after."""
     from ..atomic import atomic_write_text, check_output_path
     from ..data.timebase import record_notes
+    from ..diagnose.document import dumps
     from ..diagnose.effects import effect_library, select_effects
     from ..diagnose.loop import DiagnoseSettings
     from ..diagnose.loop import diagnose as run_diagnose
@@ -187,17 +187,14 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
         progress.close()
     if executor is not None:
         # after Ctrl-C the refits still running are dropped, not waited for
-        executor.close(cancel=bool(outcome.report.get("interrupted")))
+        executor.close(cancel=outcome.interrupted)
+    outcome = replace(outcome, data_notes=tuple(notes),
+                      command={"data": list(data), "diagram": chart, "validate": list(validation),
+                               "effects_file": effects_file, "output": output, "map": dict(maps)})
     report = outcome.report
-    if notes:
-        report["data_notes"] = notes
-    report["command"] = {"data": list(data), "diagram": chart, "validate": list(validation),
-                         "effects_file": effects_file, "output": output, "map": dict(maps)}
-    report_text = json.dumps(strict_json(report), indent=1, allow_nan=False) + "\n"
+    report_text = dumps(report)
     chart_text = dump_diagram(outcome.diagram, {"from": "sdnn diagnose", "chart": chart,
-                                                "accepted": [f"{a['effect']} at {a['at']}"
-                                                             + (f" ({a['label']})" if a["label"] else "")
-                                                             for a in report["accepted"]]})
+                                                "accepted": [a.title for a in outcome.accepted]})
     if output:
         atomic_write_text(output, chart_text)
     if report_path:
