@@ -243,6 +243,42 @@ class Diagnosis:
     nominal: Any = field(default=None, repr=False)
     screens: tuple = field(default=(), repr=False)
 
+    def __repr__(self) -> str:
+        from .notebook import one_line
+
+        return one_line(self)
+
+    def summary(self) -> str:
+        """A short text: what was accepted, how the run stopped, the error before and after, each round's
+        decision, the best candidates, the final chart's parameters (units, ± standard error and %), warnings.
+
+        The whole report is ``sdnn diagnose``'s text (diagnose.summary.format_report) and REPORT.json."""
+        from .notebook import summary_text
+
+        return summary_text(self)
+
+    def _repr_html_(self) -> str:
+        """What a notebook shows: the page's sections as an HTML fragment (no figures)."""
+        from .notebook import summary_html
+
+        return summary_html(self)
+
+    def candidates_table(self):
+        """Every scored candidate (round, rank, effect, at, label, score, p_value, refitted, achieved_decrease,
+        validation_rms_after, start, error): a pandas DataFrame when pandas is installed, else a list of dicts."""
+        from ..tables import frame
+        from .notebook import CANDIDATE_COLUMNS, candidate_rows
+
+        return frame(candidate_rows(self), CANDIDATE_COLUMNS)
+
+    def rounds_table(self):
+        """Each round's decision and its error before and after (DataFrame when pandas is installed, else a list
+        of dicts)."""
+        from ..tables import frame
+        from .notebook import ROUND_COLUMNS, round_rows
+
+        return frame(round_rows(self), ROUND_COLUMNS)
+
     @property
     def n_accepted(self) -> int:
         return len(self.accepted)
