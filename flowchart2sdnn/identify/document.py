@@ -205,9 +205,21 @@ def from_document(doc: dict, chart: Diagram | None = None) -> Identification:
     )
 
 
-def read_result(path: str | Path, chart: Diagram | None = None) -> Identification:
-    """Read a RESULT.json written by `sdnn identify` as an :class:`Identification`."""
-    return from_document(load_result(path), chart)
+def read_result(path: str | Path, chart: Diagram | str | Path | None = None) -> Identification:
+    """Read a RESULT.json written by `sdnn identify` as an :class:`Identification`.
+
+    Its ``chart`` (what ``simulate``, ``compare`` and ``linearize`` run) is `chart` when given (a Diagram or a
+    chart file), else the identified chart written beside the result (``RESULT.chart.yaml``, or the file its
+    ``identified_chart`` key names), else None.
+    """
+    from ..diagram.validate import load_diagram
+
+    data = load_result(path)
+    if chart is None:
+        chart = _chart_beside(path, data)
+    elif not isinstance(chart, Diagram):
+        chart = load_diagram(chart)
+    return from_document(data, chart)
 
 
 def _chart_beside(path: str | Path, data: dict) -> Diagram | None:
@@ -294,14 +306,22 @@ def apply_result_file(diagram: Diagram, path: str | Path) -> Diagram:
     return chart
 
 
-def fix_from_result(diagram: Diagram, path: str | Path) -> tuple[Diagram, list[str]]:
-    """Take matching parameters and nonlinear blocks from an earlier result and fix them (the paper's stages)."""
-    params, nonlinear = _values(load_result(path))
+def fix_from_result(diagram: Diagram, source: str | Path | Identification) -> tuple[Diagram, list[str]]:
+    """Take matching parameters and nonlinear blocks from an earlier result (a RESULT.json file or an
+    :class:`Identification`) and fix them (the paper's stages); also the names taken."""
+    if isinstance(source, Identification):
+        where = f"the result of chart '{source.source.name}'"
+        params = source.values
+        nonlinear = {b: {"a": list(c.a), "v": list(c.v), **({"b": list(c.b)} if c.b is not None else {}),
+                         **({"c": c.c} if c.c is not None else {})} for b, c in source.curves.items()}
+    else:
+        where = str(source)
+        params, nonlinear = _values(load_result(source))
     names = set(diagram.parameter_names)
     params = {k: v for k, v in params.items() if k in names}
-    nonlinear = _matching_curves(diagram, nonlinear, str(path))
+    nonlinear = _matching_curves(diagram, nonlinear, where)
     if not params and not nonlinear:
-        raise SdnnError.at("RES004", "no parameter or nonlinear block name matches the chart", str(path),
+        raise SdnnError.at("RES004", "no parameter or nonlinear block name matches the chart", where,
                            hint=f"the chart has parameters {', '.join(sorted(names)) or 'none'}")
     return with_values(diagram, params, nonlinear, fix=True), sorted(params) + sorted(nonlinear)
 
