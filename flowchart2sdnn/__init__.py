@@ -8,7 +8,8 @@ The public API (see the README's "Python API"):
 * :func:`load_chart`, :func:`compile_chart`: a chart file -> :class:`Diagram` -> compiled network
 * :func:`read_csv`, :func:`dataset_from_frame`: measured records (:class:`Dataset`)
 * :func:`identify` -> :class:`Identification` (``.parameters``, ``.chart``, ``.simulate()``, ``.to_json()``)
-* :func:`diagnose` -> :class:`Diagnosis`; :func:`read_result` reads a RESULT.json back
+* :func:`diagnose` -> :class:`Diagnosis`; :func:`read_result` reads a RESULT.json back, :func:`read_report` a
+  REPORT.json
 
 Names are imported on first use, so ``import flowchart2sdnn`` (and the command line) stays fast.
 """
@@ -36,6 +37,7 @@ __all__ = [
     "identify",
     "diagnose",
     "read_result",
+    "read_report",
     "Diagram",
     "Dataset",
     "Compilation",
@@ -51,7 +53,7 @@ __all__ = [
 
 _HOME = {
     "load_chart": "api", "compile_chart": "api", "read_csv": "api", "dataset_from_frame": "api",
-    "read_result": "api", "identify": "api", "diagnose": "api",
+    "read_result": "api", "read_report": "api", "identify": "api", "diagnose": "api",
     "Diagram": "diagram.model", "Dataset": "data.csvdata", "Compilation": "compiler",
     "IdentifySettings": "identify.settings", "Identification": "identify.result", "Estimate": "identify.result",
     "Curve": "identify.result", "Metrics": "identify.result",

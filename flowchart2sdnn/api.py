@@ -26,6 +26,7 @@ from .compiler import Compilation, compile_diagram
 from .data.columns import source_header
 from .data.csvdata import TIME_COLUMNS, Dataset
 from .data.csvdata import read_csv as _read_csv_columns
+from .diagnose.document import read_report
 from .diagnose.loop import DiagnoseSettings, Diagnosis
 from .diagnose.loop import diagnose as _diagnose
 from .diagram.model import Diagram
@@ -35,7 +36,8 @@ from .identify.document import read_result
 from .identify.result import Identification
 from .identify.run import identify as _identify
 
-__all__ = ["load_chart", "compile_chart", "read_csv", "dataset_from_frame", "identify", "diagnose", "read_result"]
+__all__ = ["load_chart", "compile_chart", "read_csv", "dataset_from_frame", "identify", "diagnose", "read_result",
+           "read_report"]
 
 
 def load_chart(path: str | Path) -> Diagram:

@@ -19,9 +19,10 @@ from typing import Any
 import numpy as np
 
 from ..diagram.model import Diagram
+from .extra import Extra
 from .settings import IdentifySettings
 
-__all__ = ["Estimate", "Curve", "Metrics", "Fit", "Uncertainty", "OptimizerTrace", "MultistartSummary",
+__all__ = ["Estimate", "Curve", "Metrics", "Fit", "Uncertainty", "OptimizerTrace", "MultistartSummary", "Extra",
            "OnlineTrace", "RecordInfo", "DataInfo", "ChartSource", "Identification"]
 
 
@@ -200,8 +201,10 @@ class Identification:
     data : DataInfo
     versions : {package: version}
     optimizer, multistart, uncertainty, online : optional parts (None where they do not apply)
-    extra : {key: value}         further RESULT.json keys written beside the result (the command line, the
-                                 identified chart's file), kept so a document reads back unchanged
+    extra : Extra                further RESULT.json keys, typed (``.discretization``, ``.shooting``,
+                                 ``.parameters_per_record``, ``.command``, ``.identified_chart``, ...; unknown keys
+                                 of a document read back in ``.other``) and readable as a mapping of those keys;
+                                 a plain dict given here becomes one
 
     The fitting problem and the optimizer's raw results (``problem``, ``x``, ``lm``, ``online_run``) are there
     for the code that continues from a fit (diagnose, plots); they are not part of the document.
@@ -224,11 +227,15 @@ class Identification:
     multistart: MultistartSummary | None = None
     uncertainty: Uncertainty | None = None
     online: OnlineTrace | None = None
-    extra: Mapping[str, Any] = field(default_factory=dict)
+    extra: Extra = field(default_factory=Extra)
     problem: Any = field(default=None, repr=False)
     x: np.ndarray | None = field(default=None, repr=False)
     lm: Any = field(default=None, repr=False)
     online_run: Any = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.extra, Extra):
+            object.__setattr__(self, "extra", Extra.of(self.extra))
 
     def __repr__(self) -> str:
         from .notebook import one_line
