@@ -11,6 +11,7 @@ from html import escape
 
 from ..identify.notebook import (
     MAX_WARNINGS,
+    STYLE,
     count,
     g,
     html_list,
@@ -29,8 +30,8 @@ CANDIDATE_COLUMNS = ("round", "rank", "effect", "at", "label", "score", "p_value
                      "validation_rms_after", "start", "error")
 ROUND_COLUMNS = ("round", "effect", "at", "label", "accepted", "reason", "rms_before", "rms_after",
                  "validation_rms_before", "validation_rms_after", "bic_before", "bic_after")
-#: the best candidates shown per round (every refitted one is shown)
-BEST = 5
+#: the best candidates shown per round, and at most this many in all (every one: candidates_table())
+BEST, BEST_ALL = 3, 9
 
 
 def candidate_rows(d: Diagnosis) -> list[dict]:
@@ -82,19 +83,19 @@ def _fits(before: FitSummary, after: FitSummary, criterion: str) -> list[list[st
 
 
 def _round_cells(d: Diagnosis) -> list[list[str]]:
-    return [[r.round, r.title, "yes" if r.accepted else "no", _arrow(r.validation_rms_before, r.validation_rms_after),
+    return [[r.title, "yes" if r.accepted else "no", _arrow(r.validation_rms_before, r.validation_rms_after),
              "" if r.accepted else short(r.reason, 120)] for r in d.rounds]
 
 
 def _best(d: Diagnosis) -> list[list[str]]:
-    """The `BEST` best scored candidates of each round and every refitted one."""
+    """The `BEST` best scored candidates of each round."""
     return [[c.round, c.rank, c.title, g(c.score), g(c.p_value, 2),
              g(c.refit.validation_rms_after) if c.refit else ""]
-            for c in d.candidates if c.refit is not None or (c.rank <= BEST and c.score is not None)]
+            for c in d.candidates if c.rank <= BEST and c.score is not None][:BEST_ALL]
 
 
 FIT_HEAD = ["", "chart as given", "final chart"]
-ROUND_HEAD = ["round", "effect", "accepted", "validation RMS", "why not"]
+ROUND_HEAD = ["effect", "accepted", "validation RMS", "why not"]
 BEST_HEAD = ["round", "rank", "candidate", "score", "p", "val RMS refitted"]
 
 
@@ -125,11 +126,11 @@ def summary_text(d: Diagnosis) -> str:
 def summary_html(d: Diagnosis) -> str:
     """The page's sections as one HTML fragment (a few kB, no figures): verdict, before and after, rounds, best
     candidates, warnings, the final chart's identification."""
-    parts = [f"<div class=\"sdnn-diagnosis\"><h4>Diagnosis of chart '{escape(_name(d))}'</h4>",
+    parts = [f"<div class=\"sdnn\">{STYLE}<h4>Diagnosis of chart '{escape(_name(d))}'</h4>",
              f"<p><b>accepted</b>: {escape(_accepted(d))}<br><b>stopped</b>: {escape(short(_stop(d)))}</p>",
              "<h4>Before and after</h4>" + html_table(FIT_HEAD, _fits(d.before, d.after, d.settings.criterion))]
     if d.rounds:
-        parts.append("<h4>Rounds</h4>" + html_table(ROUND_HEAD, _round_cells(d), left=3))
+        parts.append("<h4>Rounds</h4>" + html_table(ROUND_HEAD, _round_cells(d), left=2))
     best = _best(d)
     if best:
         parts.append(f"<h4>Candidates, best first</h4><p>{len(d.candidates)} scored; all: "
@@ -137,5 +138,5 @@ def summary_html(d: Diagnosis) -> str:
     own = _warnings(d)
     if own:
         parts.append("<h4>Warnings</h4>" + html_list(own, more=".warnings"))
-    parts.append(identification_html(d.identification, "Final chart, identified", heading="h5"))
+    parts.append(identification_html(d.identification, "Final chart, identified", heading="h5", style=False))
     return "".join(parts) + "</div>"

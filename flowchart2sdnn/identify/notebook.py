@@ -15,7 +15,7 @@ from html import escape
 from ..tables import table
 from .result import Identification, Metrics
 
-__all__ = ["one_line", "summary_text", "summary_html", "parameter_rows", "fit_rows", "short", "count", "html_table",
+__all__ = ["one_line", "summary_text", "summary_html", "parameter_rows", "fit_rows", "short", "count", "html_table", "STYLE",
            "html_list", "PARAMETER_COLUMNS", "FIT_COLUMNS", "MAX_ROWS", "MAX_WARNINGS", "MAX_CHARS"]
 
 #: at most this many parameter rows, warnings, and characters of one warning or message are shown
@@ -123,14 +123,18 @@ def summary_text(ident: Identification, title: str | None = None) -> str:
     return "\n".join(out).rstrip() + "\n"
 
 
-def html_table(head: list[str], rows: list[list], left: int = 1) -> str:
-    """A plain HTML table (the first `left` columns left-aligned, the rest numbers)."""
-    right = ' style="text-align:right"'
+#: the fragment's one style rule: numbers right-aligned, the first n columns of a table of class ln (names) left
+STYLE = ("<style>.sdnn td,.sdnn th{text-align:right;padding:1px 6px}.sdnn table{border-collapse:collapse}"
+         + ",".join(f".sdnn .l{n} {c}:nth-child(-n+{n})" for n in (1, 2, 3) for c in ("td", "th"))
+         + "{text-align:left}</style>")
 
+
+def html_table(head: list[str], rows: list[list], left: int = 1) -> str:
+    """A plain HTML table (the first `left` columns, 1 to 3, left-aligned, the rest numbers; see STYLE)."""
     def cells(tag: str, row) -> str:
-        return "".join(f"<{tag}{'' if i < left else right}>{escape(str(c))}</{tag}>" for i, c in enumerate(row))
-    return ("<table><thead><tr>" + cells("th", head) + "</tr></thead><tbody>"
-            + "".join(f"<tr>{cells('td', r)}</tr>" for r in rows) + "</tbody></table>")
+        return "".join(f"<{tag}>{escape(str(c))}</{tag}>" for c in row)
+    return (f"<table class=l{left}><tr>" + cells("th", head) + "</tr>"
+            + "".join(f"<tr>{cells('td', r)}</tr>" for r in rows) + "</table>")
 
 
 def html_list(items, limit: int = MAX_WARNINGS, more: str = "") -> str:
@@ -140,12 +144,13 @@ def html_list(items, limit: int = MAX_WARNINGS, more: str = "") -> str:
     return f"<ul>{lis}</ul>{tail}"
 
 
-def summary_html(ident: Identification, title: str | None = None, heading: str = "h4") -> str:
+def summary_html(ident: Identification, title: str | None = None, heading: str = "h4", style: bool = True) -> str:
     """The page's status, parameter, fit and warning sections as one HTML fragment (a few kB, no figures);
-    `title` heads it (an h4), `heading` is the sections' heading tag."""
+    `title` heads it (an h4), `heading` is the sections' heading tag, `style` False leaves out the style rule
+    (a fragment inside another that has it)."""
     h = heading
     title = title or f"Identification of chart '{ident.source.name}'"
-    parts = [f"<div class=\"sdnn-identification\"><h4>{escape(title)}</h4>",
+    parts = [f"<div class=\"sdnn\">{STYLE if style else ''}<h4>{escape(title)}</h4>",
              f"<p><b>status</b>: {escape(_status(ident))}"
              + (f" &mdash; {escape(short(ident.message))}" if ident.message else "") + "</p>"]
     if ident.parameters:
