@@ -65,7 +65,8 @@ def _status(ident: Identification) -> str:
 def one_line(ident: Identification) -> str:
     """``<Identification 'engine': 3 parameters (2 free), small_cost_change (converged), fit w1 97.2 %, ...>``."""
     free = sum(1 for e in ident.parameters.values() if not e.fixed)
-    fit = ", ".join(f"{o} {g(p, 3)} %" for o, p in ident.fit.train.fit_percent.items())
+    fit = ", ".join(f"{o} {g(p, 3)} %" if p is not None else f"{o} diverged"
+                    for o, p in ident.fit.train.fit_percent.items())
     curves = f", {count(len(ident.curves), 'curve')}" if ident.curves else ""
     warn = f", {count(len(ident.warnings), 'warning')}" if ident.warnings else ""
     return (f"<Identification '{ident.source.name}': {count(len(ident.parameters), 'parameter')} ({free} free)"
