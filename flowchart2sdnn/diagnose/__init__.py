@@ -1,8 +1,8 @@
 """`sdnn diagnose`: trace the residual to a missing effect, add it to the chart, refit, report before and after.
 
 Pipeline: residual tests (:mod:`.residual`) -> the effects library (:mod:`.effects`, :mod:`.usereffects`) ->
-the score test of every candidate (:mod:`.score`) -> brief refits and acceptance (:mod:`.loop`) -> text
-report (:mod:`.summary`); the click command lives in :mod:`flowchart2sdnn.cli.diagnose`.
+the score test of every candidate (:mod:`.score`) -> brief refits and acceptance (:mod:`.loop`); the text,
+page and figures live in :mod:`flowchart2sdnn.report`, the click command in :mod:`flowchart2sdnn.cli.diagnose`.
 """
 
 from __future__ import annotations
