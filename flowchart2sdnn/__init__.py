@@ -20,6 +20,7 @@ import importlib
 
 from . import diagnose as _diagnose_package  # noqa: F401
 from . import identify as _identify_package  # noqa: F401
+from . import report as _report_package  # noqa: F401  (registers the drawing results delegate to; cheap)
 from ._version import __version__
 
 # The subpackages identify/ and diagnose/ are imported above (cheap: their modules load on first use); their

@@ -46,7 +46,7 @@ def test_the_page_holds_the_tables_every_figure_and_the_warning(page):
 
 
 def test_no_matplotlib_is_one_line_naming_html_before_any_work(tmp_path, monkeypatch):
-    plots = importlib.import_module("flowchart2sdnn.identify.plots")  # (sd.identify is the function)
+    plots = importlib.import_module("flowchart2sdnn.report.canvas")
 
     def missing(option="--plots"):
         raise SdnnError.at("PLOT001", f"{option} needs matplotlib, which is not installed", option)

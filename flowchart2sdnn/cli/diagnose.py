@@ -1,4 +1,4 @@
-"""`sdnn diagnose`: the click layer over diagnose.loop (formatting lives in diagnose.summary).
+"""`sdnn diagnose`: the click layer over diagnose.loop (formatting lives in report.diagnose_text).
 
 Layer: cli (the rule is in the package docstring).
 """
@@ -128,9 +128,9 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     from ..diagnose.effects import effect_library, select_effects
     from ..diagnose.loop import DiagnoseSettings
     from ..diagnose.loop import diagnose as run_diagnose
-    from ..diagnose.summary import format_report
     from ..diagram.dump import dump_diagram
     from ..diagram.validate import load_diagram
+    from ..report.diagnose_text import format_report
 
     if validation and split:
         raise click.UsageError("give either --validate or --split, not both")
@@ -201,12 +201,12 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
         atomic_write_text(report_path, report_text)
     written = []
     if plots:
-        from ..diagnose.plots import write_plots
+        from ..report.diagnose_plots import write_plots
 
         written = write_plots(outcome, train[0], plots)
     if html_path:
-        from ..diagnose.html import diagnosis_html
-        from ..identify.html import write_html
+        from ..report.diagnose_page import diagnosis_html
+        from ..report.html import write_html
 
         written.append(write_html(html_path, diagnosis_html(outcome, train[0], val,
                                                             f"sdnn diagnose {' '.join(data)} --diagram {chart}")))

@@ -1,4 +1,4 @@
-"""`sdnn identify`: the click layer over identify.run (formatting lives in identify.summary).
+"""`sdnn identify`: the click layer over identify.run (formatting lives in report.identify_text).
 
 Layer: cli (the rule is in the package docstring).
 """
@@ -116,7 +116,7 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
     from ..identify.run import IdentifySettings
     from ..identify.run import identify as run_identify
     from ..identify.settings import IDENTIFY_GEODESIC
-    from ..identify.summary import format_result
+    from ..report.identify_text import format_result
 
     if validation and split:
         raise click.UsageError("give either --validate or --split, not both")
@@ -183,11 +183,12 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
             records = [(records[0][0], train[0].slice(0, n), 0)]
             checks = [(f"validation: {Path(train[0].path).name} after the split", train[0], n)]
     if plots:
-        from ..identify.plots import write_plots
+        from ..report.identify_plots import write_plots
 
         write_plots(outcome, plots, records, checks)
     if html_path:
-        from ..identify.html import identification_html, write_html
+        from ..report.html import write_html
+        from ..report.identify_page import identification_html
 
         write_html(html_path, identification_html(outcome, records, checks, fixed,
                                                   f"sdnn identify {' '.join(data)} --diagram {chart}"))

@@ -350,7 +350,7 @@ def html_option():
 def require_figures(plots, html_path) -> None:
     """Check matplotlib before any work when figures or a page are asked for (PLOT001 naming the option)."""
     if plots or html_path:
-        from ..identify.plots import require_matplotlib
+        from ..report.canvas import require_matplotlib
 
         require_matplotlib("--plots" if plots else "--html")
 

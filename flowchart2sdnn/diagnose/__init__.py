@@ -2,8 +2,8 @@
 
 Pipeline: residual tests (:mod:`.residual`) -> the effects library (:mod:`.effects`, :mod:`.usereffects`) ->
 the score test of every candidate (:mod:`.score`) -> brief refits and acceptance (:mod:`.loop`) -> the typed
-:class:`~.result.Diagnosis`, REPORT.json (:mod:`.document`) and the text report (:mod:`.summary`); the click
-command lives in :mod:`flowchart2sdnn.cli.diagnose`.
+:class:`~.result.Diagnosis` and REPORT.json (:mod:`.document`); the text, page and figures live in
+:mod:`flowchart2sdnn.report`, the click command in :mod:`flowchart2sdnn.cli.diagnose`.
 """
 
 from __future__ import annotations

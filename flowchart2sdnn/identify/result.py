@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..diagram.model import Diagram
+from ..views import view
 from .extra import Extra
 from .settings import IdentifySettings
 
@@ -322,7 +323,8 @@ class Identification:
             None: free run; k: k-step-ahead prediction (restarts from the measured outputs every k samples,
             see :mod:`flowchart2sdnn.identify.compare`).
         plot : str or Path, optional
-            Also draw the comparison (one PNG, every record; needs matplotlib) into this file.
+            Also draw the comparison (one PNG, every record; needs matplotlib) into this file: drawn by
+            :func:`flowchart2sdnn.report.figures.write_compare`, which does the same with the returned data.
         alignment : str, optional
             "zoh" or "direct"; default the one of the fit.
 
@@ -342,10 +344,8 @@ class Identification:
             records = [(Path(d.path).name, d, 0) for d in items]
         compiled, x = self._network()
         out = compare_records(compiled, x, records, alignment or self.settings.alignment, horizon, self.chart)
-        if plot is not None:
-            from .figures import write_compare
-
-            write_compare(out, plot, self.chart.name if self.chart is not None else self.source.name)
+        if plot is not None:  # the figure is a view: report/ registered it (see flowchart2sdnn.views)
+            view("compare_png")(out, plot, self.chart.name if self.chart is not None else self.source.name)
         return out
 
     def linearize(self, at: Mapping[str, float] | None = None, kink: str = "zero"):
@@ -363,7 +363,7 @@ class Identification:
 
     def to_document(self) -> dict:
         """The RESULT.json body, a new dict each call (see :mod:`flowchart2sdnn.identify.document`)."""
-        from .document import to_document
+        from .serialize import to_document
 
         return to_document(self)
 
@@ -375,6 +375,6 @@ class Identification:
 
     def to_json(self) -> str:
         """RESULT.json as text (strict JSON: non-finite numbers are stored as null, with a warning)."""
-        from .document import dumps
+        from .serialize import dumps
 
         return dumps(self.to_document())

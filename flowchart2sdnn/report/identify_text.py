@@ -4,8 +4,8 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
+from ..identify.result import Identification
 from ..tables import table
-from .result import Identification
 
 __all__ = ["format_result"]
 

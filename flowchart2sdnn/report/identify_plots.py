@@ -27,24 +27,15 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SdnnError
-from .canvas import new_figure, save_png
-from .problem import columns_of
+from ..identify.arrays import columns_of
+from ..identify.compare import compare_records, signal_units
+from .canvas import new_figure, require_matplotlib, save_png
+from .figures import write_compare, write_resid
 
-__all__ = ["require_matplotlib", "write_plots", "curve_input_range"]
+__all__ = ["write_plots", "curve_input_range", "resid_inputs"]
 
-_INSTALL = "pip install flowchart2sdnn[plots]"
 # resolving a signal through gains and sums: charts nest only a few levels; the limit guards cycles
 _MAX_DEPTH = 32
-
-
-def require_matplotlib(option: str = "--plots") -> None:
-    """Raise a one-line SdnnError (PLOT001) naming `option` and the install command when matplotlib is missing."""
-    try:
-        import matplotlib  # noqa: F401
-        from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: F401
-    except ImportError:
-        raise SdnnError.at("PLOT001", f"{option} needs matplotlib, which is not installed: {_INSTALL}", option,
-                           hint=_INSTALL) from None
 
 
 def _figure(rows: int, width: float = 9.0, height: float = 2.4):
@@ -219,7 +210,7 @@ def _plot_curve(outcome, block: str, weights, directory: Path) -> Path:
     return _save(fig, directory / f"curve_{safe}.png")
 
 
-def _resid_inputs(data, names, rows: int, alignment: str) -> np.ndarray:
+def resid_inputs(data, names, rows: int, alignment: str) -> np.ndarray:
     """The inputs acting on the last `rows` rows of `data` (zoh: input k-1 acts on row k)."""
     u = columns_of(data, names)
     shift = 1 if alignment == "zoh" else 0
@@ -252,9 +243,6 @@ def write_plots(outcome, directory: str | Path, records=(), validation=()) -> li
     SdnnError
         PLOT001 when matplotlib is missing, PLOT002 when the directory cannot be created.
     """
-    from .compare import compare_records, signal_units
-    from .figures import write_compare, write_resid
-
     require_matplotlib()
     directory = Path(directory)
     try:
@@ -279,7 +267,7 @@ def write_plots(outcome, directory: str | Path, records=(), validation=()) -> li
         if validation:
             rec, (label, data, _) = comparison.records[len(records)], validation[0]
             e = np.column_stack([rec.measured[n] - rec.model[n] for n in names])
-            u = _resid_inputs(data, inputs, rec.rows, problem.alignment)
+            u = resid_inputs(data, inputs, rec.rows, problem.alignment)
             written += write_resid(e, u, names, inputs, directory, label, units, prefix="resid_validation")
     params_png = _plot_parameters(outcome, directory)
     if params_png is not None:

@@ -5,23 +5,22 @@ simulated, training record) of the chart as given (left) and of the final chart 
 the effect attaches to (a speed for friction, an input for a dead time, ...): a friction curve shows up as
 a step at zero speed on the left and is gone on the right. ``whiteness.png`` shows the residual
 autocorrelation before and after with the 99 % band; ``resid_<output>.png`` the residual analysis of the final
-chart (autocorrelation and cross-correlation with each input, 99 % band; see identify.figures). Written like
+chart (autocorrelation and cross-correlation with each input, 99 % band; see :mod:`.figures`). Written like
 the identify figures: an Agg canvas per figure, rendered to bytes and written atomically.
 """
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write_bytes
 from ..data.csvdata import Dataset
+from ..diagnose.loop import Diagnosis, Fitted
 from ..identify.compare import signal_units
-from ..identify.figures import resid_figure, safe_name
 from ..identify.problem import build_problem
-from .loop import Diagnosis, Fitted
+from .canvas import new_figure, save_png
+from .figures import resid_figure, safe_name
 
 __all__ = ["write_plots", "figures"]
 
@@ -29,19 +28,7 @@ _MAX_POINTS = 20000
 
 
 def _figure(rows: int, cols: int):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(4.5 * cols, max(3.0, 2.6 * rows)), dpi=100, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig, fig.subplots(rows, cols, squeeze=False)
-
-
-def _save(fig, path: Path) -> Path:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", metadata={"Software": None})
-    atomic_write_bytes(path, buffer.getvalue())
-    return path
+    return new_figure(rows, cols, width=4.5 * cols, height=2.6)
 
 
 def _traces(f: Fitted, train: Dataset, alignment: str, seed: int):
@@ -117,4 +104,4 @@ def write_plots(diagnosis: Diagnosis, train: Dataset, directory: str | Path) -> 
     """Write the figures; returns the paths written. Needs matplotlib (checked by the CLI first)."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    return [_save(fig, directory / name) for name, fig in figures(diagnosis, train)]
+    return [save_png(fig, directory / name) for name, fig in figures(diagnosis, train)]

@@ -4,90 +4,27 @@ The page holds the chart's name and description, the status and warnings, the pa
 value, 95 % interval, unit), the learned curves, the fit table, and the figures: measured against model for
 every record (:func:`.figures.compare_figure`), the residual analysis per output (:func:`.figures.resid_figure`),
 and the Bode plot of the chart linearised at the record's operating point over Welch's H1 from the training
-record (:mod:`.bode`). Figures are PNGs embedded as base64 ``data:`` URIs; the page loads nothing else (no
-scripts, no fonts, no style sheets from elsewhere). Text from charts and files is HTML-escaped.
-
-The building blocks (:func:`page`, :func:`table`, :func:`figure`, :func:`section`) are shared with the
-diagnose report (:mod:`flowchart2sdnn.diagnose.html`).
+record (:mod:`.bode`). The page is built of the pieces in :mod:`.html` (one file, nothing loaded from
+elsewhere); the diagnose page (:mod:`.diagnose_page`) reuses its sections for the final chart.
 """
 
 from __future__ import annotations
 
-import base64
-import html
 from collections.abc import Sequence
 from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write_text
-from .canvas import png_bytes
+from ..analysis.linearize import linearize
+from ..analysis.response import empirical_response
+from ..errors import SdnnError
+from ..identify.compare import compare_records, signal_units
+from .bode import bode_figure
+from .figures import compare_figure, resid_figure
+from .html import chart_section, esc, figure, page, paragraph, section, table
+from .identify_plots import resid_inputs
 
-__all__ = ["page", "table", "figure", "section", "paragraph", "identification_sections", "bode_section",
-           "chart_section",
-           "identification_html", "write_html"]
-
-_STYLE = """
-body { font-family: system-ui, -apple-system, "Segoe UI", Roboto, sans-serif; margin: 0 auto; padding: 1em 2em;
-       max-width: 1200px; color: #222; line-height: 1.4; }
-h1 { font-size: 1.5em; margin-bottom: 0.2em; } h2 { font-size: 1.2em; border-bottom: 1px solid #ccc; }
-.sub { color: #555; margin-top: 0; }
-.scroll { overflow-x: auto; max-width: 100%; }
-table { border-collapse: collapse; margin: 0.5em 0 1em; font-size: 0.9em; }
-th, td { border: 1px solid #ccc; padding: 0.2em 0.6em; text-align: right; white-space: nowrap; }
-th { background: #f0f0f0; } td.l, th.l { text-align: left; }
-figure { margin: 0.5em 0 1.5em; } figure img { max-width: 100%; height: auto; border: 1px solid #ddd; }
-figcaption { color: #555; font-size: 0.9em; }
-.warn { background: #fff4d6; border-left: 4px solid #e0a000; padding: 0.4em 0.8em; margin: 0.3em 0; }
-.ok { background: #e8f6e8; border-left: 4px solid #3a3; padding: 0.4em 0.8em; margin: 0.3em 0; }
-code { background: #f4f4f4; padding: 0 0.2em; }
-"""
-
-esc = html.escape
-
-
-def page(title: str, parts: Sequence[str], subtitle: str = "") -> str:
-    """A whole HTML5 document: `title` as heading, `parts` (HTML fragments) in order, the style inline."""
-    head = f"<h1>{esc(title)}</h1>" + (f'\n<p class="sub">{esc(subtitle)}</p>' if subtitle else "")
-    body = "\n".join([head, *parts])
-    return (f'<!DOCTYPE html>\n<html lang="en">\n<head>\n<meta charset="utf-8">\n'
-            f'<meta name="viewport" content="width=device-width, initial-scale=1">\n<title>{esc(title)}</title>\n'
-            f"<style>{_STYLE}</style>\n</head>\n<body>\n{body}\n</body>\n</html>\n")
-
-
-def section(title: str, parts: Sequence[str], anchor: str = "") -> str:
-    ident = f' id="{esc(anchor)}"' if anchor else ""
-    return f"<section{ident}>\n<h2>{esc(title)}</h2>\n" + "\n".join(parts) + "\n</section>"
-
-
-def paragraph(text: str, kind: str = "") -> str:
-    return f'<p class="{kind}">{esc(text)}</p>' if kind else f"<p>{esc(text)}</p>"
-
-
-def _cell(value, digits: int) -> str:
-    if value is None:
-        return ""
-    if isinstance(value, float):
-        return f"{value:.{digits}g}"
-    return str(value)
-
-
-def table(headers: Sequence[str], rows: Sequence[Sequence], left: int = 1, digits: int = 6) -> str:
-    """An HTML table; the first `left` columns are left-aligned (names), numbers shown to `digits` digits."""
-    def cells(row, tag):
-        return "".join(f'<{tag}{" class=l" if i < left else ""}>{esc(_cell(v, digits))}</{tag}>'
-                       for i, v in enumerate(row))
-
-    body = "\n".join(f"<tr>{cells(r, 'td')}</tr>" for r in rows)
-    return f'<div class="scroll"><table>\n<tr>{cells(headers, "th")}</tr>\n{body}\n</table></div>'
-
-
-def figure(fig, caption: str, alt: str | None = None, dpi: float = 80) -> str:
-    """A matplotlib figure as an embedded PNG with a caption (`dpi` 80 keeps a page of figures small)."""
-    data = base64.b64encode(png_bytes(fig, dpi)).decode("ascii")
-    return (f'<figure><img src="data:image/png;base64,{data}" alt="{esc(alt or caption)}">'
-            f"<figcaption>{esc(caption)}</figcaption></figure>")
-
+__all__ = ["identification_sections", "bode_section", "identification_html"]
 
 def _ci(p) -> str:
     return "" if not p.ci95 else f"[{p.ci95[0]:.6g}, {p.ci95[1]:.6g}]"
@@ -129,10 +66,6 @@ def bode_section(diagram, problem, x, record=None) -> str | None:
     """The Bode figure of `diagram` linearised at the RMS of its states over the free run of the record, over
     Welch's H1 from `record` (a Dataset; default the fitted inputs and targets); None when the chart has no
     input or output, or cannot be linearised (the reason is then a paragraph)."""
-    from ..analysis.linearize import linearize
-    from ..errors import SdnnError
-    from .bode import bode_figure, empirical_response
-
     if not diagram.input_names or not diagram.output_names:
         return None
     states = {b.name for b in diagram.blocks if b.kind == "integrator"}
@@ -170,12 +103,8 @@ def identification_sections(outcome, records=(), validation=(), fixed_from: Sequ
     """The report's sections for one identification: tables, then compare, residual and Bode figures.
 
     `records` and `validation` are (label, Dataset, score_from) as for
-    :func:`flowchart2sdnn.identify.plots.write_plots`.
+    :func:`.identify_plots.write_plots`.
     """
-    from .compare import compare_records, signal_units
-    from .figures import compare_figure, resid_figure
-    from .plots import _resid_inputs
-
     parts = _result_tables(outcome, fixed_from)
     problem, x = outcome.problem, outcome.x
     if problem is None or x is None:
@@ -195,7 +124,7 @@ def identification_sections(outcome, records=(), validation=(), fixed_from: Sequ
     if validation and every:
         rec, (label, data, _) = comparison.records[len(records)], validation[0]
         e = np.column_stack([rec.measured[n] - rec.model[n] for n in names])
-        residuals.append((label, e, _resid_inputs(data, inputs, rec.rows, problem.alignment)))
+        residuals.append((label, e, resid_inputs(data, inputs, rec.rows, problem.alignment)))
     figs = []
     for label, e, u in residuals:
         for j, name in enumerate(names):
@@ -211,14 +140,6 @@ def identification_sections(outcome, records=(), validation=(), fixed_from: Sequ
         if bode:
             parts.append(bode)
     return parts
-
-
-def chart_section(diagram, highlight=(), title: str = "The chart") -> str:
-    """The chart as a block diagram (inline SVG: the page stays one file), highlighted blocks in orange."""
-    from ..analysis.drawing import chart_svg
-
-    svg = chart_svg(diagram, highlight)
-    return section(title, ['<div style="overflow-x:auto">' + svg + "</div>"], "chart")
 
 
 def identification_html(outcome, records=(), validation=(), fixed_from: Sequence[str] = (),
@@ -242,7 +163,3 @@ def identification_html(outcome, records=(), validation=(), fixed_from: Sequence
                 subtitle)
 
 
-def write_html(path: str | Path, text: str) -> Path:
-    """Write a page atomically: a reader sees the old file or the whole new one."""
-    atomic_write_text(path, text)
-    return Path(path)

@@ -4,9 +4,9 @@ The page holds the chart's name, the error of the chart as given, the ranked can
 score test's predicted decrease of the cost, its p-value, and for the refitted ones the achieved decrease and
 validation RMS), the before/after of every round (train and validation RMS, AIC, validation fit %; accepted or
 why not), for every accepted effect the residual against the signal it attaches to before and after
-(:func:`.plots.figures`), the residual autocorrelation before and after, and the final chart as an
+(:func:`.diagnose_plots.figures`), the residual autocorrelation before and after, and the final chart as an
 identification report (parameters with intervals and units, fit, compare, residual and Bode figures; see
-:mod:`flowchart2sdnn.identify.html`). Figures are embedded PNGs; nothing is loaded from elsewhere.
+:mod:`.identify_page`). Figures are embedded PNGs; nothing is loaded from elsewhere.
 """
 
 from __future__ import annotations
@@ -15,19 +15,11 @@ from collections.abc import Sequence
 from pathlib import Path
 
 from ..data.csvdata import Dataset
-from ..identify.html import (
-    chart_section,
-    esc,
-    figure,
-    identification_sections,
-    page,
-    paragraph,
-    section,
-    table,
-)
-from .loop import Diagnosis
-from .plots import figures
-from .summary import STOP_MESSAGES, _candidate_rows, _fit_pct
+from ..diagnose.loop import Diagnosis
+from .diagnose_plots import figures
+from .diagnose_text import STOP_MESSAGES, _candidate_rows, _fit_pct
+from .html import chart_section, esc, figure, page, paragraph, section, table
+from .identify_page import identification_sections
 
 __all__ = ["diagnosis_html"]
 

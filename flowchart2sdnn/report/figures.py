@@ -19,8 +19,8 @@ from pathlib import Path
 import numpy as np
 
 from ..fit.correlation import LEVEL, MAX_LAG, bound, xcorr
-from .canvas import new_figure, save_png
-from .compare import Comparison
+from ..identify.compare import Comparison
+from .canvas import new_figure, require_matplotlib, save_png
 
 __all__ = ["axis_label", "compare_figure", "write_compare", "resid_figure", "write_resid", "safe_name"]
 
@@ -87,8 +87,6 @@ def compare_figure(comparison: Comparison, title: str = ""):
 
 def write_compare(comparison: Comparison, path: str | Path, name: str = "") -> Path:
     """Draw :func:`compare_figure` into a PNG file (replaced atomically)."""
-    from .plots import require_matplotlib
-
     require_matplotlib()
     what = "free run" if comparison.horizon is None else f"{comparison.horizon}-step-ahead prediction"
     title = f"{name}: measured and model output ({what})" if name else ""

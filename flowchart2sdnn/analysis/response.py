@@ -1,0 +1,54 @@
+"""The frequency response measured in data: Welch's H1 estimate of one input -> output pair.
+
+H1(f) = S_uy(f) / S_uu(f) from averaged, Hann-windowed segments (scipy.signal), with the magnitude-squared
+coherence |S_uy|^2 / (S_uu S_yy) beside it: where the coherence is well below 1 the estimate is noise, leakage
+or nonlinearity (a friction that the linear model leaves out), or the input was fed back from the output (the
+relay of the virtual bench), which biases H1. The data's zero-order hold adds half a sample of delay (phase
+T omega / 2), which the continuous model does not show. Drawn over the linearised chart by
+:mod:`flowchart2sdnn.report.bode`.
+
+Layer: analysis.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["Empirical", "empirical_response"]
+
+
+@dataclass(frozen=True, eq=False)
+class Empirical:
+    """An H1 estimate of one input -> output pair: frequencies (Hz), H1 (complex), coherence, segment length."""
+
+    input: str
+    output: str
+    f: np.ndarray
+    h: np.ndarray
+    coherence: np.ndarray
+    nperseg: int
+
+
+def empirical_response(u: np.ndarray, y: np.ndarray, sample_time: float, input_name: str = "u",
+                       output_name: str = "y", nperseg: int | None = None) -> Empirical:
+    """Welch's H1 estimate from input samples `u` and output samples `y` (same rows, time step `sample_time`).
+
+    `nperseg` defaults to the largest power of two giving at least 8 segments (at most 8192 samples).
+    """
+    from scipy.signal import coherence, csd, welch
+
+    u = np.asarray(u, dtype=float)
+    y = np.asarray(y, dtype=float)
+    if nperseg is None:
+        nperseg = int(2 ** max(4, min(13, math.floor(math.log2(max(len(u) // 8, 16))))))
+    fs = 1.0 / sample_time
+    f, puu = welch(u, fs=fs, nperseg=nperseg)
+    _, puy = csd(u, y, fs=fs, nperseg=nperseg)
+    _, coh = coherence(u, y, fs=fs, nperseg=nperseg)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        h = puy / puu
+    keep = f > 0
+    return Empirical(input_name, output_name, f[keep], h[keep], coh[keep], nperseg)

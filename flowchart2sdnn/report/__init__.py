@@ -1,0 +1,30 @@
+"""The views: text, HTML pages and figures of every command, drawn from typed results only.
+
+Computation (identify/, diagnose/, batch/, ...) never draws and never imports this package; the command line
+and the public API call it. Modules:
+
+* :mod:`.identify_text`, :mod:`.diagnose_text`: what the commands print (pure functions of the results)
+* :mod:`.html`: the pieces of a self-contained page; :mod:`.identify_page`, :mod:`.diagnose_page` the pages
+* :mod:`.canvas`: one figure on its own Agg canvas (no pyplot), PNG bytes written atomically
+* :mod:`.figures` (compare, residual analysis), :mod:`.bode`, :mod:`.identify_plots`, :mod:`.diagnose_plots`,
+  :mod:`.drift` (the fleet report): the figures
+
+Importing the package is cheap (matplotlib and the modules above load on first use); it registers the
+drawing that ``Identification.compare(plot=)`` delegates to (:mod:`flowchart2sdnn.views`).
+
+Layer: above every computation package, below the API and the command line.
+"""
+
+from __future__ import annotations
+
+from ..views import register
+
+
+def _compare_png(comparison, path, name: str = ""):
+    """:func:`.figures.write_compare`, loaded on first use: `import flowchart2sdnn` must not pay for it."""
+    from .figures import write_compare
+
+    return write_compare(comparison, path, name)
+
+
+register("compare_png", _compare_png)
