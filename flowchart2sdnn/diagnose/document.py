@@ -1,9 +1,10 @@
-"""REPORT.json: the only writer and reader of the diagnose report format.
+"""REPORT.json: the one place the diagnose report format is written (through :mod:`.serialize`) and read.
 
 :func:`to_document` turns a :class:`~flowchart2sdnn.diagnose.result.Diagnosis` into the document (keys as they
-have always been: users' scripts read them), :func:`from_document` reads one back (``to_document`` of it gives
-the body back), :func:`dumps` writes it as strict JSON, :func:`read_report` reads a file. The final fit's
-``final`` is a RESULT.json body (:mod:`flowchart2sdnn.identify.document`).
+have always been: users' scripts read them; written by :mod:`.serialize`, re-exported here),
+:func:`from_document` reads one back (``to_document`` of it gives the body back), :func:`dumps` writes it as
+strict JSON, :func:`read_report` reads a file. The final fit's ``final`` is a RESULT.json body
+(:mod:`flowchart2sdnn.identify.document`).
 
 Layer: diagnose.
 """
@@ -12,14 +13,12 @@ from __future__ import annotations
 
 import json
 from collections.abc import Mapping
-from dataclasses import asdict, fields
+from dataclasses import fields
 from pathlib import Path
 
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify.document import from_document as identification_from
-from ..identify.document import to_document as identification_document
-from ..strictjson import strict_json
 from .fitting import DiagnoseSettings
 from .result import (
     AcceptedEffect,
@@ -32,78 +31,10 @@ from .result import (
     ResidualCheck,
     Round,
 )
+from .serialize import REPORT_FORMAT, REPORT_VERSION, dumps, to_document
 
 __all__ = ["to_document", "from_document", "dumps", "read_report", "load_report", "REPORT_FORMAT",
            "REPORT_VERSION", "fit_summary", "read_round", "read_candidate", "read_accepted"]
-
-REPORT_FORMAT = "sdnn-diagnose"
-REPORT_VERSION = 1
-
-
-def _plain(x):
-    """Tuples as lists and mappings as dicts, all the way down: what the document holds."""
-    if isinstance(x, Mapping):
-        return {k: _plain(v) for k, v in x.items()}
-    if isinstance(x, (list, tuple)):
-        return [_plain(v) for v in x]
-    return x
-
-
-def _flat(part) -> dict:
-    """A part whose fields are named as its keys, as the document's mapping."""
-    return {f.name: _plain(getattr(part, f.name)) for f in fields(part)}
-
-
-# ------------------------------------------------------------------------------------------------ writing
-def _candidate(c: CandidateRow) -> dict:
-    out = {f.name: _plain(getattr(c, f.name)) for f in fields(c) if f.name != "refit"}
-    if (r := c.refit) is not None:
-        out.update({"refitted": True, "achieved_cost": r.achieved_cost, "achieved_decrease": r.achieved_decrease,
-                    "start": r.start, "validation_rms_after": r.validation_rms_after,
-                    r.criterion + "_after": r.criterion_after})
-    return out
-
-
-def _round(r: Round) -> dict:
-    out = {f.name: _plain(getattr(r, f.name)) for f in fields(r)}
-    out["before"] = _flat(r.before)
-    out["after"] = None if r.after is None else _flat(r.after)
-    out["control"] = None if r.control is None else _flat(r.control)
-    return out
-
-
-def to_document(d: Diagnosis) -> dict:
-    """The REPORT.json body of a diagnosis (numbers as computed: :func:`dumps` stores NaN/inf as null)."""
-    settings = {**asdict(d.settings), "split": d.split, "effects": list(d.effects)}
-    doc = {
-        "format": REPORT_FORMAT,
-        "version": REPORT_VERSION,
-        "stop": d.stop,
-        "last_round": d.last_round,
-        "n_accepted": d.n_accepted,
-        "first_fit": _flat(d.first_fit),
-        "interrupted": d.interrupted,
-        "candidates": [_candidate(c) for c in d.candidates],
-        "rounds": [_round(r) for r in d.rounds],
-        "accepted": [_flat(a) for a in d.accepted],
-        "before": _flat(d.before),
-        "after": _flat(d.after),
-        "whiteness": {"before": _plain(d.whiteness[0].analysis), "after": _plain(d.whiteness[1].analysis)},
-        "final": identification_document(d.identification),
-        "settings": settings,
-        "timing": _plain(d.timing),
-    }
-    if d.data_notes:
-        doc["data_notes"] = list(d.data_notes)
-    if d.command is not None:
-        doc["command"] = _plain(d.command)
-    doc.update(d.extra)
-    return doc
-
-
-def dumps(doc: dict) -> str:
-    """A document as REPORT.json text (strict JSON: NaN and infinities as null; what `--report` writes)."""
-    return json.dumps(strict_json(doc), indent=1, allow_nan=False) + "\n"
 
 
 # ------------------------------------------------------------------------------------------------ reading

@@ -19,6 +19,7 @@ from typing import Any
 
 from ..diagram.model import Diagram
 from ..identify.result import Identification
+from ..views import view
 from .fitting import DiagnoseSettings
 
 __all__ = ["FirstFit", "FitSummary", "Refit", "CandidateRow", "Control", "Round", "AcceptedEffect",
@@ -197,7 +198,7 @@ class Diagnosis:
     Attributes
     ----------
     stop : str                   how the whole run ended ("done_after_accepting", "nothing_significant", ...;
-                                 diagnose.summary.STOP_MESSAGES says each in words); ``last_round`` how its last
+                                 report.diagnose_text.STOP_MESSAGES says each in words); ``last_round`` how its last
                                  round ended
     n_accepted : int             (the number of ``accepted``)
     first_fit : FirstFit
@@ -244,30 +245,24 @@ class Diagnosis:
     screens: tuple = field(default=(), repr=False)
 
     def __repr__(self) -> str:
-        from .notebook import one_line
-
-        return one_line(self)
+        return view("diagnosis_line")(self)
 
     def summary(self) -> str:
         """A short text: what was accepted, how the run stopped, the error before and after, each round's
         decision, the best candidates, the final chart's parameters (units, ± standard error and %), warnings.
 
-        The whole report is ``sdnn diagnose``'s text (diagnose.summary.format_report) and REPORT.json."""
-        from .notebook import summary_text
-
-        return summary_text(self)
+        The whole report is ``sdnn diagnose``'s text (report.diagnose_text.format_report) and REPORT.json."""
+        return view("diagnosis_text")(self)
 
     def _repr_html_(self) -> str:
         """What a notebook shows: the page's sections as an HTML fragment (no figures)."""
-        from .notebook import summary_html
-
-        return summary_html(self)
+        return view("diagnosis_html")(self)
 
     def candidates_table(self):
         """Every scored candidate (round, rank, effect, at, label, score, p_value, refitted, achieved_decrease,
         validation_rms_after, start, error): a pandas DataFrame when pandas is installed, else a list of dicts."""
         from ..tables import frame
-        from .notebook import CANDIDATE_COLUMNS, candidate_rows
+        from .rows import CANDIDATE_COLUMNS, candidate_rows
 
         return frame(candidate_rows(self), CANDIDATE_COLUMNS)
 
@@ -275,7 +270,7 @@ class Diagnosis:
         """Each round's decision and its error before and after (DataFrame when pandas is installed, else a list
         of dicts)."""
         from ..tables import frame
-        from .notebook import ROUND_COLUMNS, round_rows
+        from .rows import ROUND_COLUMNS, round_rows
 
         return frame(round_rows(self), ROUND_COLUMNS)
 
@@ -298,7 +293,7 @@ class Diagnosis:
 
     def to_document(self) -> dict:
         """The REPORT.json body, a new dict each call (see :mod:`flowchart2sdnn.diagnose.document`)."""
-        from .document import to_document
+        from .serialize import to_document
 
         return to_document(self)
 
@@ -310,6 +305,6 @@ class Diagnosis:
 
     def to_json(self) -> str:
         """REPORT.json as text (strict JSON: non-finite numbers stored as null)."""
-        from .document import dumps
+        from .serialize import dumps
 
         return dumps(self.to_document())

@@ -239,30 +239,24 @@ class Identification:
             object.__setattr__(self, "extra", Extra.of(self.extra))
 
     def __repr__(self) -> str:
-        from .notebook import one_line
-
-        return one_line(self)
+        return view("identification_line")(self)
 
     def summary(self) -> str:
         """A short text: status, parameters with units, ± standard error and %, fit per output, warnings.
 
-        ``print(result.summary())``; the whole report is ``sdnn identify``'s text (identify.summary.format_result)
+        ``print(result.summary())``; the whole report is ``sdnn identify``'s text (report.identify_text.format_result)
         and the RESULT.json document (:meth:`to_json`)."""
-        from .notebook import summary_text
-
-        return summary_text(self)
+        return view("identification_text")(self)
 
     def _repr_html_(self) -> str:
         """What a notebook shows: the page's status, parameter, fit and warning sections (no figures)."""
-        from .notebook import summary_html
-
-        return summary_html(self)
+        return view("identification_html")(self)
 
     def parameters_table(self):
         """The parameters as a table: a pandas DataFrame when pandas is installed, else a list of dicts; columns
         parameter, value, unit, stderr, stderr_percent, ci95_low, ci95_high, init, fixed."""
         from ..tables import frame
-        from .notebook import PARAMETER_COLUMNS, parameter_rows
+        from .rows import PARAMETER_COLUMNS, parameter_rows
 
         return frame(parameter_rows(self), PARAMETER_COLUMNS)
 
@@ -270,7 +264,7 @@ class Identification:
         """The fit per record (train, validation) and output as a table (DataFrame when pandas is installed, else
         a list of dicts); columns record, output, rms, fit_percent, cost, rows."""
         from ..tables import frame
-        from .notebook import FIT_COLUMNS, fit_rows
+        from .rows import FIT_COLUMNS, fit_rows
 
         return frame(fit_rows(self), FIT_COLUMNS)
 

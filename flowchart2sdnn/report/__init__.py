@@ -10,7 +10,8 @@ and the public API call it. Modules:
   :mod:`.drift` (the fleet report): the figures
 
 Importing the package is cheap (matplotlib and the modules above load on first use); it registers the
-drawing that ``Identification.compare(plot=)`` delegates to (:mod:`flowchart2sdnn.views`).
+drawing that ``Identification.compare(plot=)`` delegates to and the notebook views (``repr``, ``summary()``,
+``_repr_html_``) of identifications and diagnoses (:mod:`.notebook`), through :mod:`flowchart2sdnn.views`.
 
 Layer: above every computation package, below the API and the command line.
 """
@@ -28,3 +29,17 @@ def _compare_png(comparison, path, name: str = ""):
 
 
 register("compare_png", _compare_png)
+
+
+def _notebook(name: str):
+    """A view of :mod:`.notebook` (repr, summary(), _repr_html_ of the results), loaded on first use."""
+    def draw(*args, **kwargs):
+        from . import notebook
+
+        return getattr(notebook, name)(*args, **kwargs)
+    return draw
+
+
+for _name in ("identification_line", "identification_text", "identification_html", "diagnosis_line",
+              "diagnosis_text", "diagnosis_html"):
+    register(_name, _notebook(_name))

@@ -1,28 +1,29 @@
-"""An identification as a notebook shows it: one line (``repr``), a short text (``summary()``), an HTML fragment
-(``_repr_html_``: the status, parameter, fit and warning sections of the page) and its tables as rows.
+"""Results as a notebook shows them: one line (``repr``), a short text (``summary()``) and an HTML fragment
+(``_repr_html_``: the page's sections without figures) for an identification and a diagnosis.
 
 Short on purpose: a result holds traces of thousands of numbers (cost history, multi-start starts, quasi-online
-trajectories) that belong in RESULT.json and the page, not in a cell's output. Long warnings and long tables
-are cut, saying how many were left out and where to find them.
+trajectories, every candidate's score) that belong in RESULT.json / REPORT.json and the pages, not in a cell's
+output. Long warnings and long tables are cut, saying how many were left out and where to find them. The
+results ask for these views by name (:mod:`flowchart2sdnn.views`, registered by :mod:`flowchart2sdnn.report`).
 
-Layer: identify.
+Layer: report.
 """
 
 from __future__ import annotations
 
 from html import escape
 
+from ..diagnose.result import Diagnosis, FitSummary
+from ..identify.result import Identification
+from ..identify.rows import fit_rows, parameter_rows
 from ..tables import table
-from .result import Identification, Metrics
+from .diagnose_text import STOP_MESSAGES
 
-__all__ = ["one_line", "summary_text", "summary_html", "parameter_rows", "fit_rows", "short", "count", "html_table", "STYLE",
-           "html_list", "PARAMETER_COLUMNS", "FIT_COLUMNS", "MAX_ROWS", "MAX_WARNINGS", "MAX_CHARS"]
+__all__ = ["identification_line", "identification_text", "identification_html", "diagnosis_line",
+           "diagnosis_text", "diagnosis_html"]
 
 #: at most this many parameter rows, warnings, and characters of one warning or message are shown
 MAX_ROWS, MAX_WARNINGS, MAX_CHARS = 30, 6, 240
-PARAMETER_COLUMNS = ("parameter", "value", "unit", "stderr", "stderr_percent", "ci95_low", "ci95_high", "init",
-                     "fixed")
-FIT_COLUMNS = ("record", "output", "rms", "fit_percent", "cost", "rows")
 
 
 def g(x, digits: int = 4) -> str:
@@ -35,34 +36,12 @@ def short(text: str, limit: int = MAX_CHARS) -> str:
     return text if len(text) <= limit else text[: limit - 1].rstrip() + "\u2026"
 
 
-def _percent(value: float, stderr: float | None) -> float | None:
-    return None if stderr is None or not value else 100.0 * stderr / abs(value)
-
-
-def parameter_rows(ident: Identification) -> list[dict]:
-    """One row per chart parameter: value, unit, standard error (also in % of the value), 95 % interval, init."""
-    return [{"parameter": n, "value": e.value, "unit": e.unit, "stderr": e.stderr,
-             "stderr_percent": _percent(e.value, e.stderr), "ci95_low": e.ci95[0] if e.ci95 else None,
-             "ci95_high": e.ci95[1] if e.ci95 else None, "init": e.init, "fixed": e.fixed}
-            for n, e in ident.parameters.items()]
-
-
-def fit_rows(ident: Identification) -> list[dict]:
-    """One row per record (train, validation) and output: RMS, fit %, cost E, rows scored."""
-    out = []
-    for which, m in (("train", ident.fit.train), ("validation", ident.fit.validation)):
-        if isinstance(m, Metrics):
-            out += [{"record": which, "output": o, "rms": m.rms[o], "fit_percent": m.fit_percent.get(o),
-                     "cost": m.cost, "rows": m.rows} for o in m.rms]
-    return out
-
-
 def _status(ident: Identification) -> str:
     how = {True: "converged", False: "not converged", None: ""}[ident.converged]
     return ident.status + (f" ({how})" if how else "") + (", interrupted" if ident.interrupted else "")
 
 
-def one_line(ident: Identification) -> str:
+def identification_line(ident: Identification) -> str:
     """``<Identification 'engine': 3 parameters (2 free), small_cost_change (converged), fit w1 97.2 %, ...>``."""
     free = sum(1 for e in ident.parameters.values() if not e.fixed)
     fit = ", ".join(f"{o} {g(p, 3)} %" if p is not None else f"{o} diverged"
@@ -104,7 +83,7 @@ def _more(n: int, what: str, where: str) -> str:
     return f"(+{n} more {what}: {where})" if n > 0 else ""
 
 
-def summary_text(ident: Identification, title: str | None = None) -> str:
+def identification_text(ident: Identification, title: str | None = None) -> str:
     """Status, parameters with units, ± standard error and %, fit per output, curves, warnings: a few lines."""
     out = [title or f"identification of chart '{ident.source.name}': {_status(ident)}"]
     if ident.message:
@@ -145,7 +124,8 @@ def html_list(items, limit: int = MAX_WARNINGS, more: str = "") -> str:
     return f"<ul>{lis}</ul>{tail}"
 
 
-def summary_html(ident: Identification, title: str | None = None, heading: str = "h4", style: bool = True) -> str:
+def identification_html(ident: Identification, title: str | None = None, heading: str = "h4",
+                        style: bool = True) -> str:
     """The page's status, parameter, fit and warning sections as one HTML fragment (a few kB, no figures);
     `title` heads it (an h4), `heading` is the sections' heading tag, `style` False leaves out the style rule
     (a fragment inside another that has it)."""
@@ -165,4 +145,102 @@ def summary_html(ident: Identification, title: str | None = None, heading: str =
     parts.append(f"<{h}>Fit</{h}>" + html_table(FIT_HEAD, _fit_cells(ident), left=2))
     if ident.warnings:
         parts.append(f"<{h}>Warnings</{h}>" + html_list(ident.warnings, more=".warnings"))
+    return "".join(parts) + "</div>"
+
+
+# ------------------------------------------------------------------------------------------------ diagnosis
+#: the best candidates shown per round, and at most this many in all (every one: candidates_table())
+BEST, BEST_ALL = 3, 9
+
+
+def _stop(d: Diagnosis) -> str:
+    text = STOP_MESSAGES.get(d.stop, d.stop)
+    if d.stop == "done_after_accepting" and d.last_round:
+        text += f" ({STOP_MESSAGES.get(d.last_round, d.last_round)})"
+    return text
+
+
+def _name(d: Diagnosis) -> str:
+    return d.identification.source.name
+
+
+def _accepted(d: Diagnosis) -> str:
+    return ", ".join(a.title for a in d.accepted) or "nothing"
+
+
+def _arrow(a, b) -> str:
+    return f"{g(a)} -> {g(b)}"
+
+
+def diagnosis_line(d: Diagnosis) -> str:
+    """``<Diagnosis 'one_mass': accepted friction at v, validation RMS 0.147 -> 0.0213, stop done_after_...>``."""
+    warn = f", {count(len(d.warnings), 'warning')}" if d.warnings else ""
+    return (f"<Diagnosis '{_name(d)}': accepted {_accepted(d)}, validation RMS "
+            f"{_arrow(d.before.validation_rms, d.after.validation_rms)}, stop {d.stop}{warn}>")
+
+
+def _fits(before: FitSummary, after: FitSummary, criterion: str) -> list[list[str]]:
+    return [["train RMS", g(before.rms), g(after.rms)],
+            ["validation RMS", g(before.validation_rms), g(after.validation_rms)],
+            [criterion.upper(), g(getattr(before, criterion), 8), g(getattr(after, criterion), 8)]]
+
+
+def _round_cells(d: Diagnosis) -> list[list[str]]:
+    return [[r.title, "yes" if r.accepted else "no", _arrow(r.validation_rms_before, r.validation_rms_after),
+             "" if r.accepted else short(r.reason, 120)] for r in d.rounds]
+
+
+def _best(d: Diagnosis) -> list[list[str]]:
+    """The `BEST` best scored candidates of each round."""
+    return [[c.round, c.rank, c.title, g(c.score), g(c.p_value, 2),
+             g(c.refit.validation_rms_after) if c.refit else ""]
+            for c in d.candidates if c.rank <= BEST and c.score is not None][:BEST_ALL]
+
+
+BEFORE_AFTER_HEAD = ["", "chart as given", "final chart"]
+ROUND_HEAD = ["effect", "accepted", "validation RMS", "why not"]
+BEST_HEAD = ["round", "rank", "candidate", "score", "p", "val RMS refitted"]
+
+
+def _warnings(d: Diagnosis) -> tuple[str, ...]:
+    # the final fit's own warnings are listed with its parameters
+    return tuple(w for w in d.warnings if w not in d.identification.warnings)
+
+
+def diagnosis_text(d: Diagnosis) -> str:
+    """The verdict, the error before and after, each round's decision, the best candidates, the final chart's
+    parameters (with units, ± standard error and %) and the warnings: a short text."""
+    crit = d.settings.criterion
+    out = [f"diagnosis of chart '{_name(d)}': accepted {_accepted(d)}", f"stopped: {short(_stop(d))}", "",
+           table(BEFORE_AFTER_HEAD, _fits(d.before, d.after, crit)).rstrip()]
+    if d.rounds:
+        out += ["", table(ROUND_HEAD, _round_cells(d)).rstrip()]
+    best = _best(d)
+    if best:
+        out += ["", f"best candidates ({len(d.candidates)} scored; all: .candidates_table()):",
+                table(BEST_HEAD, best).rstrip()]
+    own = _warnings(d)
+    if own:
+        out += ["", "warnings:"] + [f"- {short(w)}" for w in own[:MAX_WARNINGS]]
+    out += ["", identification_text(d.identification, f"final chart: {d.identification.status}").rstrip()]
+    return "\n".join(out) + "\n"
+
+
+def diagnosis_html(d: Diagnosis) -> str:
+    """The page's sections as one HTML fragment (a few kB, no figures): verdict, before and after, rounds, best
+    candidates, warnings, the final chart's identification."""
+    parts = [f"<div class=\"sdnn\">{STYLE}<h4>Diagnosis of chart '{escape(_name(d))}'</h4>",
+             f"<p><b>accepted</b>: {escape(_accepted(d))}<br><b>stopped</b>: {escape(short(_stop(d)))}</p>",
+             "<h4>Before and after</h4>"
+             + html_table(BEFORE_AFTER_HEAD, _fits(d.before, d.after, d.settings.criterion))]
+    if d.rounds:
+        parts.append("<h4>Rounds</h4>" + html_table(ROUND_HEAD, _round_cells(d), left=2))
+    best = _best(d)
+    if best:
+        parts.append(f"<h4>Candidates, best first</h4><p>{len(d.candidates)} scored; all: "
+                     "<code>.candidates_table()</code></p>" + html_table(BEST_HEAD, best, left=3))
+    own = _warnings(d)
+    if own:
+        parts.append("<h4>Warnings</h4>" + html_list(own, more=".warnings"))
+    parts.append(identification_html(d.identification, "Final chart, identified", heading="h5", style=False))
     return "".join(parts) + "</div>"
