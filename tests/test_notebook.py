@@ -23,6 +23,7 @@ import flowchart2sdnn as sd
 
 ROOT = Path(__file__).resolve().parent.parent
 LIMIT = 5000  # bytes of summary() and _repr_html_ (the notebook issue's acceptance)
+SHOWN_DAMP = 8  # the cell that shows the linearised chart read back
 EXCITATION = {"amplitude": (-6.0, 6.0), "relay_level": 3.0, "relay_switch": 1.0, "relay_band": 0.2}
 
 CELLS = [
@@ -34,6 +35,9 @@ CELLS = [
     "print(result.summary())",
     "result.parameters_table()",
     "result.fit_table()",
+    "comparison = result.compare({'first 2 s': data.slice(0, 2000)}, horizon=50)\n"
+    "comparison",
+    "comparison.frame()",
     "(out / 'stage1.json').write_text(result.to_json())\n"
     "from flowchart2sdnn.diagram.dump import dump_diagram\n"
     "(out / 'stage1.chart.yaml').write_text(dump_diagram(result.chart, {}))\n"
@@ -177,12 +181,24 @@ def test_tables_are_lists_of_dicts_without_pandas(notebook, monkeypatch):
     assert [r["effect"] for r in d.candidates_table()] == [c.effect for c in d.candidates]
 
 
+def test_a_comparison_shows_its_fit_and_its_table(notebook):
+    namespace, shown = notebook
+    rows = namespace["comparison"].table()
+    assert "\n" not in shown[5][0] and len(shown[5][0]) < 300
+    assert "50-step-ahead" in shown[5][0] and f"{rows[0]['fit_percent']:.4g} %" in shown[5][0]
+    frame = namespace["comparison"].frame()
+    if hasattr(frame, "columns"):  # pandas is installed
+        assert list(frame["fit_percent"]) == [r["fit_percent"] for r in rows]
+    else:
+        assert frame == rows
+
+
 def test_read_result_loads_the_chart_beside_it(notebook):
     namespace, shown = notebook
     back, result = namespace["back"], namespace["result"]
     assert back.chart is not None and back.values == result.values
     # the linearised identified chart, read back, is the one of the result in memory
-    assert repr(result.linearize(at={"w1": 2.0}).damp()) == shown[6][0]
+    assert repr(result.linearize(at={"w1": 2.0}).damp()) == shown[SHOWN_DAMP][0]
 
 
 def test_fix_from_an_identification_fixes_its_parameters(notebook):

@@ -70,6 +70,20 @@ class Comparison:
                  "max_error": r.max_error[name], "unit": self.units.get(name), "rows": r.rows}
                 for r in self.records for name in self.outputs]
 
+    def frame(self):
+        """:meth:`table` as a pandas DataFrame when pandas is installed (else the same list of dicts)."""
+        from ..tables import frame
+
+        return frame(self.table(), ("record", "output", "fit_percent", "rms", "max_error", "unit", "rows"))
+
+    def __repr__(self) -> str:
+        # the records hold whole traces: a notebook cell shows the fit, not the samples
+        how = "free run" if self.horizon is None else f"{self.horizon}-step-ahead prediction"
+        fits = "; ".join(f"{r['record']} {r['output']} {r['fit_percent']:.4g} %" if r["fit_percent"] is not None
+                         else f"{r['record']} {r['output']} diverged" for r in self.table()[:6])
+        more = f"; +{len(self.table()) - 6} more (.table())" if len(self.table()) > 6 else ""
+        return f"<Comparison, {how}, {len(self.records)} records: fit {fits}{more}>"
+
 
 def signal_units(diagram: Diagram | None) -> dict[str, str | None]:
     """Unit of every measured signal: the one declared under inputs/outputs, else the block's own."""
