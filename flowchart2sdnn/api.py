@@ -205,7 +205,8 @@ def diagnose(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset],
     resample : bool
         Resample records of another rate onto the chart's sample time.
     effects : sequence of str, optional
-        The built-in effects to try, by name (``["friction", "dead_time"]``, as ``--effects``); default all.
+        The built-in effects to try, by name (``["friction", "dead_time"]``, or ``"friction,dead_time"`` as
+        ``--effects``); default all. SdnnError naming an unknown one.
     **settings
         The fields of :class:`~flowchart2sdnn.diagnose.fitting.DiagnoseSettings` by name (``rounds=2, seed=0,
         top=5, criterion="bic", ...``).
@@ -224,14 +225,15 @@ def diagnose(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset],
 
     diagram = _chart(chart)
     records = _records(diagram, data, "data")
-    checked = _records(diagram, list(validation), "validation")
+    checked = _records(diagram, validation, "validation")
     train = [p for d in records for p in conform(d, diagram.sample_time, resample)]
     val = [p for d in checked for p in conform(d, diagram.sample_time, resample)]
     library = None
     if effects is not None:
         from .diagnose.effects import effect_library, select_effects
 
-        library = select_effects(list(effects), effect_library(), "effects")
+        names = effects.split(",") if isinstance(effects, str) else list(effects)  # "friction,damping" as --effects
+        library = select_effects(names, effect_library(), "effects")
     out = _diagnose(diagram, train, tuple(val), DiagnoseSettings(**settings), library)
     notes = record_notes([*train, *val])
     return replace(out, data_notes=tuple(notes)) if notes else out

@@ -237,3 +237,10 @@ def test_a_data_frame_passed_as_a_record_says_how_to_make_one():
             call()
         line = str(info.value)
         assert "DataFrame is not a record" in line and "t, M1, w1" in line and "dataset_from_frame" in line
+
+
+def test_diagnose_takes_one_validation_record_and_effects_by_name():
+    with pytest.raises(sd.SdnnError) as info:
+        sd.diagnose(ROOT / "diagrams" / "engine.yaml", [], sd.read_csv(ROOT / "examples" / "data" /
+                                                                      "engine_idle.csv"), effects="friction,backlsh")
+    assert "unknown effect 'backlsh'" in str(info.value) and "did you mean 'backlash'" in str(info.value)
