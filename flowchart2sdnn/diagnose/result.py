@@ -218,7 +218,8 @@ class Diagnosis:
 
     ``diagram`` is the augmented, identified chart (None when read from a REPORT.json alone); ``final`` and
     ``nominal`` the fits with their fitting problems, ``screens`` the score tests (for the plots and for code that
-    continues from a diagnosis; not part of the document). ``report`` is the REPORT.json body.
+    continues from a diagnosis; not part of the document). ``report`` is the REPORT.json body, ``to_json()`` its
+    text; ``summary()``, ``candidates_table()`` and ``rounds_table()`` are for reading it in a notebook.
     """
 
     stop: str

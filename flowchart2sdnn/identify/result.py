@@ -207,6 +207,9 @@ class Identification:
                                  of a document read back in ``.other``) and readable as a mapping of those keys;
                                  a plain dict given here becomes one
 
+    ``summary()``, ``parameters_table()`` and ``fit_table()`` are for reading it in a notebook (which shows
+    ``_repr_html_``), ``to_json()`` is RESULT.json.
+
     The fitting problem and the optimizer's raw results (``problem``, ``x``, ``lm``, ``online_run``) are there
     for the code that continues from a fit (diagnose, plots); they are not part of the document.
     """
