@@ -244,3 +244,16 @@ def test_diagnose_takes_one_validation_record_and_effects_by_name():
         sd.diagnose(ROOT / "diagrams" / "engine.yaml", [], sd.read_csv(ROOT / "examples" / "data" /
                                                                       "engine_idle.csv"), effects="friction,backlsh")
     assert "unknown effect 'backlsh'" in str(info.value) and "did you mean 'backlash'" in str(info.value)
+
+
+def test_simulating_a_record_without_the_charts_input_names_the_columns(notebook):
+    namespace, _ = notebook
+    data = namespace["data"]
+    renamed = sd.dataset_from_frame({"time": data.time, "M_1": data.columns["M1"], "w1": data.columns["w1"]},
+                                    time="time", name="bench.csv")
+    for call in (lambda: namespace["result"].simulate(renamed), lambda: namespace["result"].compare(renamed)):
+        with pytest.raises(sd.SdnnError) as info:
+            call()
+        assert "M1" in str(info.value) and "columns: M_1, w1" in str(info.value) and "bench.csv" in str(info.value)
+    with pytest.raises(sd.SdnnError, match="a dict is not a record"):
+        namespace["result"].simulate(dict(data.columns))

@@ -130,12 +130,21 @@ def predict(compiled: CompiledNetwork, theta: np.ndarray, data: Dataset, alignme
     return out
 
 
+def require_columns(data, names: Sequence[str]) -> None:
+    """SdnnError unless `data` is a record (a Dataset) holding every column named: CMP001 naming the record, the
+    columns missing and the ones it has (a bare KeyError said only the first name)."""
+    if not isinstance(data, Dataset):
+        raise SdnnError.at("CMP003", f"a {type(data).__name__} is not a record (Dataset)",
+                           hint="make one with read_csv(path) or dataset_from_frame(frame, time=...)")
+    missing = [n for n in names if n not in data.columns]
+    if missing:
+        raise SdnnError.at("CMP001", f"record lacks column(s) {', '.join(missing)} that the chart needs (columns: "
+                           f"{', '.join(data.columns) or 'none'})", data.path)
+
+
 def _one(compiled, theta, label: str, data: Dataset, alignment: str, horizon: int | None,
          score_from: int) -> RecordComparison:
-    missing = [n for n in (*network_input_names(compiled.net), *compiled.output_names) if n not in data.columns]
-    if missing:
-        raise SdnnError.at("CMP001", f"record lacks column(s) {', '.join(missing)} that the chart needs",
-                           data.path)
+    require_columns(data, (*network_input_names(compiled.net), *compiled.output_names))
     names = compiled.output_names
     yhat = predict(compiled, theta, data, alignment, horizon)
     start = max(score_from, fitted_rows(data.n_rows, alignment).start)

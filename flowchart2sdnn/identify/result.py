@@ -291,9 +291,11 @@ class Identification:
         alignment : str, optional
             "zoh" or "direct"; default the one of the fit.
         """
-        from .compare import predict
+        from .arrays import network_input_names
+        from .compare import predict, require_columns
 
         compiled, x = self._network()
+        require_columns(data, network_input_names(compiled.net))
         y = predict(compiled, x, data, alignment or self.settings.alignment)
         return {name: y[:, i] for i, name in enumerate(compiled.output_names)}
 
