@@ -28,11 +28,11 @@ import numpy as np
 
 from ..errors import SdnnError
 from ..identify.arrays import columns_of
-from ..identify.compare import compare_records, signal_units
+from ..identify.compare import compare_fit, record_theta, signal_units
 from .canvas import new_figure, require_matplotlib, save_png
 from .figures import write_compare, write_resid
 
-__all__ = ["write_plots", "curve_input_range", "resid_inputs"]
+__all__ = ["write_plots", "curve_input_range", "curve_figure", "resid_inputs"]
 
 # resolving a signal through gains and sums: charts nest only a few levels; the limit guards cycles
 _MAX_DEPTH = 32
@@ -98,9 +98,10 @@ def curve_input_range(outcome, block: str) -> tuple[float, float] | None:
     """(min, max) of the signal feeding nonlinear `block` in a free run over the training record, or None."""
     problem = outcome.problem
     b = next(b for b in outcome.diagram.blocks if b.name == block)
+    theta = record_theta(outcome, 0)  # the training record's own values, as its fit
     with np.errstate(all="ignore"):
-        signals = problem.compiled.signals(outcome.x, problem.inputs, problem.init)
-    params, _ = problem.compiled.values(outcome.x)
+        signals = problem.compiled.signals(theta, problem.inputs, problem.init)
+    params, _ = problem.compiled.values(theta)
     term = b.inputs[0]
     x = _signal_values(term.signal, term.sign, outcome, signals, params)
     if x is None:
@@ -180,7 +181,8 @@ def _plot_parameters(outcome, directory: Path) -> Path | None:
     return _save(fig, directory / "parameters.png")
 
 
-def _plot_curve(outcome, block: str, weights, directory: Path) -> Path:
+def curve_figure(outcome, block: str, weights):
+    """The learned curve of `block` over the range of the signal feeding it in the training record (shaded)."""
     span = curve_input_range(outcome, block)
     if span is None or not span[1] > span[0]:
         # unknown or constant input: show where the neurons bend (|a x + b| <= 3)
@@ -206,8 +208,12 @@ def _plot_curve(outcome, block: str, weights, directory: Path) -> Path:
     ax.grid(alpha=0.3)
     state = "fixed" if weights.fixed else "identified"
     ax.set_title(f"{block} = f({source}), {len(weights.a)} tanh neurons ({state})", fontsize="medium")
+    return fig
+
+
+def _plot_curve(outcome, block: str, weights, directory: Path) -> Path:
     safe = re.sub(r"[^A-Za-z0-9_.-]", "_", block)
-    return _save(fig, directory / f"curve_{safe}.png")
+    return _save(curve_figure(outcome, block, weights), directory / f"curve_{safe}.png")
 
 
 def resid_inputs(data, names, rows: int, alignment: str) -> np.ndarray:
@@ -252,8 +258,8 @@ def write_plots(outcome, directory: str | Path, records=(), validation=()) -> li
                            str(directory)) from None
     problem = outcome.problem
     names = list(problem.compiled.output_names)
-    with np.errstate(all="ignore"):
-        yhat = problem.compiled.simulate(outcome.x, problem.inputs, problem.init)
+    with np.errstate(all="ignore"):  # the first training record with its own per-record values, as the table
+        yhat = problem.compiled.simulate(record_theta(outcome, 0), problem.inputs, problem.init)
     y = problem.targets
     t = _times(outcome)
     written = [_plot_output(outcome, t, y, yhat, names, directory), _plot_residual(t, y, yhat, names, directory)]
@@ -262,7 +268,7 @@ def write_plots(outcome, directory: str | Path, records=(), validation=()) -> li
     written += write_resid(y - yhat, problem.inputs, names, inputs, directory, "training", units)
     every = [*records, *validation]
     if every:
-        comparison = compare_records(problem.compiled, outcome.x, every, problem.alignment, None, outcome.diagram)
+        comparison = compare_fit(outcome, records, validation)
         written.append(write_compare(comparison, directory / "compare.png", outcome.diagram.name))
         if validation:
             rec, (label, data, _) = comparison.records[len(records)], validation[0]
