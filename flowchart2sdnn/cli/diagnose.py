@@ -14,6 +14,7 @@ from ..strictjson import strict_json
 from .options import (
     alignment_option,
     column_reading,
+    command_line,
     data_options,
     executor_options,
     force_option,
@@ -211,8 +212,7 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
         from ..report.diagnose_page import diagnosis_html
         from ..report.html import write_html
 
-        written.append(write_html(html_path, diagnosis_html(outcome, train[0], val,
-                                                            f"sdnn diagnose {' '.join(data)} --diagram {chart}")))
+        written.append(write_html(html_path, diagnosis_html(outcome, train[0], val, command_line(), notes)))
     if not quiet:
         click.echo(format_report(report), nl=False)
         for path in [p for p in (output, report_path) if p] + [str(w) for w in written]:

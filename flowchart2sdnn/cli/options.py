@@ -370,3 +370,10 @@ def executor_options(work: str):
                             help=f"Run {work} in N local worker processes.")(func)
 
     return decorate
+
+
+def command_line() -> str:
+    """The command line of this run, quoted for a shell: what a page prints so that the run can be repeated."""
+    import shlex
+
+    return shlex.join(["sdnn", *sys.argv[1:]])
