@@ -143,7 +143,7 @@ def test_each_records_figure_shows_the_fit_of_its_table_row(records, monkeypatch
 
 
 def test_the_page_shows_every_warning_the_identify_command_printed(records, monkeypatch):
-    page, args, printed = _identify(records, monkeypatch, "--max-iter", "2")
+    page, args, printed = _identify(records, monkeypatch, "--max-iter", "2", "--lags", "40")
     warnings = [line.split("warning: ", 1)[1] for line in printed if "warning: " in line]
     assert any(w.startswith("not converged") for w in warnings)  # the test sees warnings, or it proves nothing
     _, text = read_page(page)
@@ -152,6 +152,7 @@ def test_the_page_shows_every_warning_the_identify_command_printed(records, monk
     status = next(line for line in printed if line.startswith("status: "))
     assert status in text and "(not converged)" in text
     assert f"command: {shlex.join(['sdnn', *args])}" in text  # the whole command line, options and all
+    assert "40 lags (set with --lags)" in text
 
 
 def test_the_page_shows_every_warning_and_note_the_diagnose_command_printed(tmp_path, monkeypatch):
@@ -177,3 +178,18 @@ def test_the_page_shows_every_warning_and_note_the_diagnose_command_printed(tmp_
     assert final in text
     assert "the first fit of the chart as given did not converge: max_iter" in text  # --max-iter 3 stopped it
     assert "stopped: " in text and f"command: {shlex.join(['sdnn', *args])}" in text
+
+
+def test_the_lags_span_the_slowest_mode():
+    """A shaft ringing at a 103 ms period sampled at 1 kHz needs 103 lags, not MATLAB's 25 (25 ms); a drive
+    with only a 0.5 s time constant at 10 ms, 50; never fewer than 25 nor more than a fifth of the record."""
+    from flowchart2sdnn.analysis.response import lags_for
+
+    wd = 2 * np.pi / 0.103
+    ringing = [{"pole": complex(-3.0, wd), "damped_hz": wd / (2 * np.pi)}, {"pole": complex(-40.0, 0.0),
+                                                                            "damped_hz": 0.0}]
+    assert lags_for(ringing, 0.001, 20000)[0] == 103
+    assert lags_for([{"pole": complex(-2.0, 0.0), "damped_hz": 0.0}], 0.01, 20000)[0] == 50
+    assert lags_for([{"pole": complex(-2.0, 0.0), "damped_hz": 0.0}], 0.01, 200)[0] == 40  # a fifth of 200
+    assert lags_for([{"pole": complex(-500.0, 0.0), "damped_hz": 0.0}], 0.01, 20000)[0] == 25
+    assert lags_for([{"pole": complex(0.0, 0.0), "damped_hz": 0.0}], 0.01, 20000)[0] == 25  # nothing stable

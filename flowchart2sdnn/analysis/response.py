@@ -76,5 +76,5 @@ def lags_for(modes: list[dict], sample_time: float, n: int) -> tuple[int, str]:
     else:
         return MIN_LAGS, "no stable mode to size them by"
     cap = max(MIN_LAGS, min(MAX_LAGS, n // 5))
-    lags = int(min(cap, max(MIN_LAGS, math.ceil(span / sample_time))))
+    lags = int(min(cap, max(MIN_LAGS, math.ceil(span / sample_time - 1e-9))))  # 0.103 / 0.001 is 103
     return lags, why

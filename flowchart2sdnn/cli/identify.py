@@ -20,6 +20,8 @@ from .options import (
     handle_errors,
     html_option,
     intersample_option,
+    lags_given,
+    lags_option,
     max_iter_option,
     read_records,
     require_figures,
@@ -98,6 +100,7 @@ __all__ = ["identify"]
               help="Directory for the figures (PNG; created if needed, figures of the same name replaced). "
                    "Needs matplotlib: pip install flowchart2sdnn[plots].")
 @html_option()
+@lags_option()
 @force_option()
 @click.option("--quiet", is_flag=True, help="No progress and no table.")
 @executor_options("the multi-start fits")
@@ -189,12 +192,13 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
     if plots:
         from ..report.identify_plots import write_plots
 
-        write_plots(outcome, plots, records, checks)
+        write_plots(outcome, plots, records, checks, lags_given())
     if html_path:
         from ..report.html import write_html
         from ..report.identify_page import identification_html
 
-        write_html(html_path, identification_html(outcome, records, checks, fixed, command_line(), printed))
+        write_html(html_path, identification_html(outcome, records, checks, fixed, command_line(), printed,
+                                                  lags_given()))
     if not quiet:
         click.echo(format_result(outcome, fixed), nl=False)
         if output:

@@ -102,10 +102,11 @@ def _status(diagnosis: Diagnosis, notes: Sequence[str]) -> list[str]:
 
 
 def diagnosis_html(diagnosis: Diagnosis, train: Dataset, validation: Sequence[Dataset] = (),
-                   command: str = "", notes: Sequence[str] = (), limit: int = 10) -> str:
+                   command: str = "", notes: Sequence[str] = (), limit: int = 10, lags: int | None = None) -> str:
     """The whole page (see the module docstring); `train` the first training record, `validation` the
     validation records as given to :func:`flowchart2sdnn.diagnose.loop.diagnose`, `command` the command line
-    that reproduces the run, `notes` what the command line printed about the data."""
+    that reproduces the run, `notes` what the command line printed about the data, `lags` those of the final
+    chart's residual analysis (default: from its dynamics)."""
     report = diagnosis.report
     before = report["before"]
     name = diagnosis.nominal.diagram.name
@@ -138,7 +139,7 @@ def diagnosis_html(diagnosis: Diagnosis, train: Dataset, validation: Sequence[Da
         n = max(3, int(round(split * train.n_rows)))
         records = [(records[0][0], train.slice(0, n), 0)]
         checks = [(f"validation: {Path(train.path).name} after the split", train, n)]
-    final_parts = identification_sections(final, records, checks)
+    final_parts = identification_sections(final, records, checks, lags=lags)
     parts.append(section("Final chart", [paragraph(f"'{diagnosis.diagram.name}' with the accepted effects, "
                                                    "identified:")], "final"))
     parts += final_parts

@@ -20,7 +20,7 @@ from ..diagnose.loop import Diagnosis, Fitted
 from ..identify.compare import signal_units
 from ..identify.problem import build_problem
 from .canvas import new_figure, save_png
-from .figures import resid_figure, safe_name
+from .figures import axis_label, resid_figure, safe_name
 
 __all__ = ["write_plots", "figures"]
 
@@ -58,6 +58,8 @@ def figures(diagnosis: Diagnosis, train: Dataset, resid: bool = True) -> list[tu
     measured = {n: np.asarray(train.columns[n])[first:] for n in names}  # outputs on the fitted rows
     out = []
     rng = np.random.default_rng(0)
+    units = signal_units(diagnosis.final.diagram)
+    blocks = {b.name: b.unit for b in diagnosis.final.diagram.blocks}
     for a in diagnosis.report["accepted"]:
         at = a["at"]
         # one abscissa for both panels: the measured signal, else the final chart's (the better estimate)
@@ -72,8 +74,8 @@ def figures(diagnosis: Diagnosis, train: Dataset, resid: bool = True) -> list[tu
                 ax = axes[i, j]
                 ax.plot(x[pick], e[pick, i], ".", ms=1.5, color="tab:blue" if j == 0 else "tab:green")
                 ax.axhline(0.0, color="0.3", lw=0.6)
-                ax.set_xlabel(at)
-                ax.set_ylabel(f"residual {out_name}")
+                ax.set_xlabel(axis_label(at, units.get(at) or blocks.get(at)))
+                ax.set_ylabel(axis_label(f"residual {out_name}", units.get(out_name)))
                 ax.set_title(f"{title}: {a['effect']} at {at}", fontsize=9)
         out.append((f"residual_{a['effect']}_{at}.png", fig))
     w = diagnosis.report.get("whiteness", {})
@@ -86,13 +88,12 @@ def figures(diagnosis: Diagnosis, train: Dataset, resid: bool = True) -> list[tu
                 ax.plot(s["lags"], s["r"], "o-", ms=3, color=color, label=key)
             band = w["after"]["bound"]
             ax.axhspan(-band, band, color="0.85", label=f"{100 * w['after']['level']:g} % band ±{band:.3g}")
-            ax.set_xlabel("lag (samples)")
+            ax.set_xlabel(f"lag in samples (one sample = {diagnosis.final.diagram.sample_time:g} s)")
             ax.set_ylabel(f"autocorrelation {out_name}")
             ax.legend(fontsize=8, loc="upper right")
         out.append(("whiteness.png", fig))
     if resid and e1 is not None:  # MATLAB's resid figure of the final chart, one per output
         u = np.column_stack([s1[n] for n in inputs])
-        units = signal_units(diagnosis.final.diagram)
         for j, name in enumerate(names):
             if np.all(np.isfinite(e1[:, j])) and e1.shape[0] >= 3:
                 fig = resid_figure(e1[:, j], u, name, inputs, "final chart, training record", units.get(name))

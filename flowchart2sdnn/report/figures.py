@@ -186,7 +186,7 @@ def residual_time_figure(comparison: Comparison, title: str = ""):
 
 def write_resid(residual: np.ndarray, inputs: np.ndarray, outputs: Sequence[str], input_names: Sequence[str],
                 directory: str | Path, title: str = "", units: dict | None = None,
-                prefix: str = "resid") -> list[Path]:
+                prefix: str = "resid", max_lag: int = MAX_LAG, sample_time: float | None = None) -> list[Path]:
     """One residual-analysis PNG per output, ``<prefix>_<output>.png`` in `directory`; skips a residual that
     is not finite (a diverged run has nothing to analyse)."""
     e = np.atleast_2d(np.asarray(residual, dtype=float).T).T
@@ -194,6 +194,7 @@ def write_resid(residual: np.ndarray, inputs: np.ndarray, outputs: Sequence[str]
     for j, name in enumerate(outputs):
         if not np.all(np.isfinite(e[:, j])) or e.shape[0] < 3:
             continue
-        fig = resid_figure(e[:, j], inputs, name, input_names, title, (units or {}).get(name))
+        fig = resid_figure(e[:, j], inputs, name, input_names, title, (units or {}).get(name), max_lag,
+                           sample_time=sample_time)
         written.append(save_png(fig, Path(directory) / f"{prefix}_{safe_name(name)}.png"))
     return written

@@ -21,9 +21,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.linearize import linearize
-from ..analysis.response import MIN_LAGS, empirical_response, lags_for
-from ..errors import SdnnError
+from ..analysis.response import empirical_response
 from ..identify.compare import compare_fit, record_theta, signal_units
 from .bode import bode_figure
 from .figures import compare_figure, fit_number, resid_figure, residual_time_figure, verdict
@@ -31,27 +29,9 @@ from .html import chart_section, esc, figure, page, paragraph, section
 from .identify_plots import curve_figure, resid_inputs
 from .identify_tables import fit_section, parameter_sections
 from .identify_text import status_line, warning_lines
+from .linear import linear_model, residual_lags
 
-__all__ = ["identification_sections", "bode_section", "identification_html", "status_paragraphs",
-           "linear_model"]
-
-
-def linear_model(outcome):
-    """(the chart linearised at the RMS of its states over the free run of the first training record, or
-    None; why not, or "")."""
-    diagram, problem = outcome.diagram, outcome.problem
-    if not diagram.input_names or not diagram.output_names:
-        return None, "the chart has no input or no output"
-    states = {b.name for b in diagram.blocks if b.kind == "integrator"}
-    with np.errstate(all="ignore"):
-        signals = dict(problem.compiled.signals(record_theta(outcome, 0), problem.inputs, problem.init))
-    at = {name: float(f"{np.sqrt(np.mean(np.square(v))):.3g}") for name, v in signals.items()
-          if name in states and np.all(np.isfinite(v))}
-    try:
-        model = linearize(diagram, at)
-    except (SdnnError, ValueError) as exc:
-        return None, str(exc)
-    return (model, "") if model.A.size else (None, "the chart has no state")
+__all__ = ["identification_sections", "bode_section", "identification_html", "status_paragraphs"]
 
 
 def bode_section(outcome, model, reason: str = "", record=None) -> str | None:
@@ -132,12 +112,7 @@ def identification_sections(outcome, records=(), validation=(), fixed_from: Sequ
     else:
         residuals = _fallback_residual(outcome)
     model, reason = linear_model(outcome) if outcome.online is None else (None, "")
-    why = "set with --lags"
-    if lags is None:
-        n = min(e.shape[0] for _, e, _ in residuals)
-        lags, why = lags_for(model.damp(), outcome.diagram.sample_time, n) if model is not None else (
-            MIN_LAGS, "no linearised model to size them by")
-        why = f"spanning {why}"
+    lags, why = residual_lags(outcome, min(e.shape[0] for _, e, _ in residuals), lags, model)
     figs, units = [], signal_units(outcome.diagram)
     for label, e, u in residuals:
         for j, name in enumerate(names):

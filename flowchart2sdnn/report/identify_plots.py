@@ -31,6 +31,7 @@ from ..identify.arrays import columns_of
 from ..identify.compare import compare_fit, record_theta, signal_units
 from .canvas import new_figure, require_matplotlib, save_png
 from .figures import write_compare, write_resid
+from .linear import residual_lags
 
 __all__ = ["write_plots", "curve_input_range", "curve_figure", "resid_inputs"]
 
@@ -223,7 +224,7 @@ def resid_inputs(data, names, rows: int, alignment: str) -> np.ndarray:
     return u[data.n_rows - rows - shift:data.n_rows - shift]
 
 
-def write_plots(outcome, directory: str | Path, records=(), validation=()) -> list[Path]:
+def write_plots(outcome, directory: str | Path, records=(), validation=(), lags: int | None = None) -> list[Path]:
     """Draw the figures of an identification into `directory` (created if needed); return the files written.
 
     Parameters
@@ -235,6 +236,8 @@ def write_plots(outcome, directory: str | Path, records=(), validation=()) -> li
     records, validation : sequences of (label, Dataset, score_from), optional
         The training and validation records to compare the model with in ``compare.png`` (rows before
         `score_from` are run but not shown: a validation after a split). Without them no compare.png.
+    lags : int, optional
+        Lags of the residual analysis; default spanning the slowest mode of the linearised chart, as the page.
 
     Returns
     -------
@@ -265,7 +268,10 @@ def write_plots(outcome, directory: str | Path, records=(), validation=()) -> li
     written = [_plot_output(outcome, t, y, yhat, names, directory), _plot_residual(t, y, yhat, names, directory)]
     inputs = list(problem.compiled.input_names)
     units = signal_units(outcome.diagram)
-    written += write_resid(y - yhat, problem.inputs, names, inputs, directory, "training", units)
+    lags, _ = residual_lags(outcome, len(y), lags)
+    step = outcome.diagram.sample_time
+    written += write_resid(y - yhat, problem.inputs, names, inputs, directory, "training", units, max_lag=lags,
+                           sample_time=step)
     every = [*records, *validation]
     if every:
         comparison = compare_fit(outcome, records, validation)
@@ -274,7 +280,8 @@ def write_plots(outcome, directory: str | Path, records=(), validation=()) -> li
             rec, (label, data, _) = comparison.records[len(records)], validation[0]
             e = np.column_stack([rec.measured[n] - rec.model[n] for n in names])
             u = resid_inputs(data, inputs, rec.rows, problem.alignment)
-            written += write_resid(e, u, names, inputs, directory, label, units, prefix="resid_validation")
+            written += write_resid(e, u, names, inputs, directory, label, units, prefix="resid_validation",
+                                   max_lag=lags, sample_time=step)
     params_png = _plot_parameters(outcome, directory)
     if params_png is not None:
         written.append(params_png)
