@@ -30,7 +30,7 @@ from ..errors import SdnnError
 from ..identify.arrays import columns_of
 from ..identify.compare import compare_fit, record_theta, signal_units
 from .canvas import new_figure, require_matplotlib, save_png
-from .figures import write_compare, write_resid
+from .figures import axis_label, write_compare, write_resid
 from .linear import residual_lags
 
 __all__ = ["write_plots", "curve_input_range", "curve_figure", "resid_inputs"]
@@ -203,9 +203,9 @@ def curve_figure(outcome, block: str, weights):
         ax.legend(loc="best", fontsize="small")
     b = next(b for b in outcome.diagram.blocks if b.name == block)
     source = str(b.inputs[0])
-    unit = f" in {b.unit}" if b.unit else ""
-    ax.set_xlabel(source)
-    ax.set_ylabel(f"{block}{unit}")
+    units = {**{x.name: x.unit for x in outcome.diagram.blocks}, **signal_units(outcome.diagram)}
+    ax.set_xlabel(axis_label(source, units.get(b.inputs[0].signal)))
+    ax.set_ylabel(axis_label(block, b.unit))
     ax.grid(alpha=0.3)
     state = "fixed" if weights.fixed else "identified"
     ax.set_title(f"{block} = f({source}), {len(weights.a)} tanh neurons ({state})", fontsize="medium")
