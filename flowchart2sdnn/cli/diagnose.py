@@ -210,7 +210,7 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     if plots:
         from ..report.diagnose_plots import write_plots
 
-        written = write_plots(outcome, train[0], plots)
+        written = write_plots(outcome, train[0], plots, lags_given())
     if html_path:
         from ..report.diagnose_page import diagnosis_html
         from ..report.html import write_html

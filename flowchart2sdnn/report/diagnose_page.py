@@ -125,10 +125,11 @@ def diagnosis_html(diagnosis: Diagnosis, train: Dataset, validation: Sequence[Da
     head.append(paragraph(f"chart as given: train RMS {_g(before['rms'])}, validation RMS "
                           f"{_g(before['validation_rms'])}, AIC {_g(before['aic'], 8)}, BIC {_g(before['bic'], 8)}"))
     parts = [*head, section("Candidates, ranked", _candidates(report, limit), "candidates")]
-    figs = figures(diagnosis, train, resid=False)
+    figs = figures(diagnosis, train, resid=False, lags=lags)
     effect_figs = [figure(fig, f"Residual against {file[9:-4]}: the chart as given (left) and the final chart "
                           "(right).", file[:-4]) for file, fig in figs if file.startswith("residual_")]
-    white = [figure(fig, "Residual autocorrelation before and after, with the 99 % band.", "whiteness")
+    white = [figure(fig, "Residual autocorrelation of the chart as given and of the final chart, with the 99 % band "
+                    "(the text report's whiteness test uses 25 lags).", "whiteness")
              for file, fig in figs if file == "whiteness.png"]
     parts.append(section("Before and after", [*_rounds(report), *effect_figs, *white], "rounds"))
     final = diagnosis.final.identification
