@@ -4,9 +4,10 @@ For every accepted effect, ``residual_<effect>_<at>.png`` shows, per output, the
 simulated, training record) of the chart as given (left) and of the final chart (right) against the signal
 the effect attaches to (a speed for friction, an input for a dead time, ...): a friction curve shows up as
 a step at zero speed on the left and is gone on the right. ``whiteness.png`` shows the residual
-autocorrelation before and after with the 99 % band, over lags spanning the final chart's slowest mode; ``resid_<output>.png`` the residual analysis of the final
-chart (autocorrelation and cross-correlation with each input, 99 % band; see :mod:`.figures`). Written like
-the identify figures: an Agg canvas per figure, rendered to bytes and written atomically.
+autocorrelation before and after with the 99 % band, over lags spanning the final chart's slowest mode;
+``resid_<output>.png`` the residual analysis of the final chart (autocorrelation and cross-correlation with
+each input, 99 % band; see :mod:`.figures`). Written like the identify figures: an Agg canvas per figure,
+rendered to bytes and written atomically.
 """
 
 from __future__ import annotations
