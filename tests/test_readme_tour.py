@@ -95,7 +95,8 @@ def test_the_readme_tour_runs_as_written(tmp_path, monkeypatch):
         assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before + ["tour"]), f"run {run}: outside tour/"
     # the HTML reports: self-contained, every figure there, small enough to attach
     figures, text = read_page(tour / "stage2.html")
-    assert figures == ["compare", "resid w2 training", "resid w2 validation: bench.csv after the split", "Bode plot"]
+    assert figures == ["curve MR1", "curve MR2", "compare", "residual over time", "resid w2 training: bench.csv",
+                       "resid w2 validation: bench.csv after the split", "Bode plot"]
     assert "two_mass: identification" in text and "N*m/rad" in text and "95 % interval" in text
     figures, text = read_page(tour / "diagnose.html")
     accepted = re.search(r"accepted: ([^.]*?) stopped", text).group(1)

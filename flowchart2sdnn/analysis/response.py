@@ -17,7 +17,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-__all__ = ["Empirical", "empirical_response"]
+__all__ = ["Empirical", "empirical_response", "lags_for", "MIN_LAGS", "MAX_LAGS"]
 
 
 @dataclass(frozen=True, eq=False)
@@ -52,3 +52,29 @@ def empirical_response(u: np.ndarray, y: np.ndarray, sample_time: float, input_n
         h = puy / puu
     keep = f > 0
     return Empirical(input_name, output_name, f[keep], h[keep], coh[keep], nperseg)
+
+
+#: the fewest and the most residual-correlation lags a page shows (25: MATLAB's `resid`; 1000 keeps the
+#: figure readable and the correlation cheap)
+MIN_LAGS, MAX_LAGS = 25, 1000
+
+
+def lags_for(modes: list[dict], sample_time: float, n: int) -> tuple[int, str]:
+    """(lags, why) of a residual's correlation test: enough to span the slowest dynamics of the model.
+
+    `modes` as :meth:`~flowchart2sdnn.analysis.linearize.LinearModel.damp` gives them. A correlation left by
+    a missing effect lasts about as long as the dynamics that carry it: the slowest oscillating mode's period
+    (a shaft's twist), else the slowest stable time constant. At least 25 lags, at most 1000 and a fifth of
+    the `n` samples (a longer lag rests on too few products).
+    """
+    periods = [1.0 / d["damped_hz"] for d in modes if d.get("damped_hz", 0) > 0]
+    taus = [-1.0 / d["pole"].real for d in modes if d["pole"].real < 0 and not d.get("damped_hz", 0) > 0]
+    if periods:
+        span, why = max(periods), f"the slowest mode's period, {max(periods):.3g} s"
+    elif taus:
+        span, why = max(taus), f"the slowest time constant, {max(taus):.3g} s"
+    else:
+        return MIN_LAGS, "no stable mode to size them by"
+    cap = max(MIN_LAGS, min(MAX_LAGS, n // 5))
+    lags = int(min(cap, max(MIN_LAGS, math.ceil(span / sample_time - 1e-9))))  # 0.103 / 0.001 is 103
+    return lags, why

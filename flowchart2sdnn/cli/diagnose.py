@@ -13,12 +13,15 @@ import click
 from .options import (
     alignment_option,
     column_reading,
+    command_line,
     data_options,
     executor_options,
     force_option,
     handle_errors,
     html_option,
     intersample_option,
+    lags_given,
+    lags_option,
     max_iter_option,
     read_records,
     require_figures,
@@ -113,6 +116,7 @@ def _int_list(text: str) -> tuple[int, ...]:
 @rows_option("each training record")
 @seed_option("Seed for initial curves.")
 @html_option()
+@lags_option()
 @force_option()
 @click.option("--quiet", is_flag=True, help="No progress and no report text.")
 @executor_options("the candidate refits")
@@ -203,13 +207,13 @@ def diagnose(data, chart, validation, split, output, report_path, rounds, effect
     if plots:
         from ..report.diagnose_plots import write_plots
 
-        written = write_plots(outcome, train[0], plots)
+        written = write_plots(outcome, train[0], plots, lags_given())
     if html_path:
         from ..report.diagnose_page import diagnosis_html
         from ..report.html import write_html
 
-        written.append(write_html(html_path, diagnosis_html(outcome, train[0], val,
-                                                            f"sdnn diagnose {' '.join(data)} --diagram {chart}")))
+        written.append(write_html(html_path, diagnosis_html(outcome, train[0], val, command_line(), notes,
+                                                            lags=lags_given())))
     if not quiet:
         click.echo(format_report(report), nl=False)
         for path in [p for p in (output, report_path) if p] + [str(w) for w in written]:

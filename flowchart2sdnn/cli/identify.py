@@ -13,12 +13,15 @@ import click
 from .options import (
     alignment_option,
     column_reading,
+    command_line,
     data_options,
     executor_options,
     force_option,
     handle_errors,
     html_option,
     intersample_option,
+    lags_given,
+    lags_option,
     max_iter_option,
     read_records,
     require_figures,
@@ -97,6 +100,7 @@ __all__ = ["identify"]
               help="Directory for the figures (PNG; created if needed, figures of the same name replaced). "
                    "Needs matplotlib: pip install flowchart2sdnn[plots].")
 @html_option()
+@lags_option()
 @force_option()
 @click.option("--quiet", is_flag=True, help="No progress and no table.")
 @executor_options("the multi-start fits")
@@ -175,6 +179,9 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
         result_text = dumps({**outcome.to_document(), **extra})
         atomic_write_text(chart_out, chart_text)
         atomic_write_text(output, result_text)
+    # what is printed beside the result's own warnings, on stderr at the end: the page shows it too
+    printed = ([f"not converged: {outcome.message} (raise --max-iter, or start closer)"]
+               if outcome.converged is False and outcome.status != "interrupted" else [])
     if plots or html_path:
         records = [(f"training: {Path(d.path).name}", d, 0) for d in train]
         checks = [(f"validation: {Path(val.path).name}", val, 0)] if val is not None else []
@@ -185,21 +192,21 @@ def identify(data, chart, output, fix_from, validation, init_window, shooting, s
     if plots:
         from ..report.identify_plots import write_plots
 
-        write_plots(outcome, plots, records, checks)
+        write_plots(outcome, plots, records, checks, lags_given())
     if html_path:
         from ..report.html import write_html
         from ..report.identify_page import identification_html
 
-        write_html(html_path, identification_html(outcome, records, checks, fixed,
-                                                  f"sdnn identify {' '.join(data)} --diagram {chart}"))
+        write_html(html_path, identification_html(outcome, records, checks, fixed, command_line(), printed,
+                                                  lags_given()))
     if not quiet:
         click.echo(format_result(outcome, fixed), nl=False)
         if output:
             click.echo(f"wrote {output} and {chart_out}")
         if html_path:
             click.echo(f"wrote {html_path}")
-    if outcome.converged is False and outcome.status != "interrupted":
-        click.echo(f"warning: not converged: {outcome.message} (raise --max-iter, or start closer)", err=True)
+    for line in printed:
+        click.echo(f"warning: {line}", err=True)
     if outcome.status == "interrupted":
         click.echo(f"interrupted: {'the best result so far is in ' + output if output else 'no -o, nothing written'}",
                    err=True)

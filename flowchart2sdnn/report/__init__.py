@@ -4,7 +4,8 @@ Computation (identify/, diagnose/, batch/, ...) never draws and never imports th
 and the public API call it. Modules:
 
 * :mod:`.identify_text`, :mod:`.diagnose_text`: what the commands print (pure functions of the results)
-* :mod:`.html`: the pieces of a self-contained page; :mod:`.identify_page`, :mod:`.diagnose_page` the pages
+* :mod:`.html`: the pieces of a self-contained page; :mod:`.identify_page` (its tables in
+  :mod:`.identify_tables`), :mod:`.diagnose_page` the pages; :mod:`.linear` the linearised chart they read
 * :mod:`.canvas`: one figure on its own Agg canvas (no pyplot), PNG bytes written atomically
 * :mod:`.figures` (compare, residual analysis), :mod:`.bode`, :mod:`.identify_plots`, :mod:`.diagnose_plots`,
   :mod:`.drift` (the fleet report): the figures

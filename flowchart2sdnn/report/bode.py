@@ -86,7 +86,8 @@ def bode_figure(model: LinearModel, estimates: list[Empirical] = (), f_max: floa
             phase.set_xlabel("frequency in Hz")
         mag.set_xlim(lo, hi)
     point = ", ".join(f"{k} = {v:g}" for k, v in model.at.items())
-    fig.suptitle(f"{model.name}: Bode plot of the model linearised at {point}", fontsize="medium")
+    # the operating point on a line of its own, wrapped: a drive with many states has a long one
+    fig.suptitle(f"{model.name}: Bode plot of the model linearised at\n{point}", fontsize="medium", wrap=True)
     return fig
 
 

@@ -29,6 +29,7 @@ figcaption { color: #555; font-size: 0.9em; }
 .warn { background: #fff4d6; border-left: 4px solid #e0a000; padding: 0.4em 0.8em; margin: 0.3em 0; }
 .ok { background: #e8f6e8; border-left: 4px solid #3a3; padding: 0.4em 0.8em; margin: 0.3em 0; }
 code { background: #f4f4f4; padding: 0 0.2em; }
+.diagram svg { max-width: 100%; height: auto; }
 """
 
 esc = html.escape
@@ -80,7 +81,7 @@ def figure(fig, caption: str, alt: str | None = None, dpi: float = 80) -> str:
 def chart_section(diagram, highlight=(), title: str = "The chart") -> str:
     """The chart as a block diagram (inline SVG: the page stays one file), highlighted blocks in orange."""
     svg = chart_svg(diagram, highlight)
-    return section(title, ['<div style="overflow-x:auto">' + svg + "</div>"], "chart")
+    return section(title, ['<div class="diagram">' + svg + "</div>"], "chart")
 
 
 def write_html(path: str | Path, text: str) -> Path:

@@ -1,10 +1,16 @@
 """One self-contained HTML page per run (`identify --html REPORT.html`): what an engineer attaches to a ticket.
 
-The page holds the chart's name and description, the status and warnings, the parameter table (identified
-value, 95 % interval, unit), the learned curves, the fit table, and the figures: measured against model for
-every record (:func:`.figures.compare_figure`), the residual analysis per output (:func:`.figures.resid_figure`),
-and the Bode plot of the chart linearised at the record's operating point over Welch's H1 from the training
-record (:mod:`.bode`). The page is built of the pieces in :mod:`.html` (one file, nothing loaded from
+The page holds the chart's name and description, the command line that reproduces the run, the status (the
+rule that stopped the fit) and every warning the command line printed, the tables (:mod:`.identify_tables`:
+parameters ± stderr, per-record values, correlations, learned curves, the fit per record) and the figures:
+each learned curve over its data range, measured against model for every record
+(:func:`.figures.compare_figure`), the residual over time, the residual analysis per output with its verdict
+in words (:func:`.figures.resid_figure`; lags spanning the slowest mode), and the Bode plot of the chart
+linearised at the record's operating point over Welch's H1 from the training record (:mod:`.bode`).
+
+Every figure of a record is computed with the parameters its table row was scored with
+(:func:`flowchart2sdnn.identify.compare.compare_fit`: per-record values, the validation record's fitted
+initial state); the captions repeat the figure's fit % as the table prints it. The page is built of the pieces in :mod:`.html` (one file, nothing loaded from
 elsewhere); the diagnose page (:mod:`.diagnose_page`) reuses its sections for the final chart.
 """
 
@@ -15,70 +21,28 @@ from pathlib import Path
 
 import numpy as np
 
-from ..analysis.linearize import linearize
 from ..analysis.response import empirical_response
-from ..errors import SdnnError
-from ..identify.compare import compare_records, signal_units
+from ..identify.compare import compare_fit, record_theta, signal_units
 from .bode import bode_figure
-from .figures import compare_figure, resid_figure
-from .html import chart_section, esc, figure, page, paragraph, section, table
-from .identify_plots import resid_inputs
+from .figures import compare_figure, fit_number, resid_figure, residual_time_figure, verdict
+from .html import chart_section, esc, figure, page, paragraph, section
+from .identify_plots import curve_figure, resid_inputs
+from .identify_tables import fit_section, parameter_sections
+from .identify_text import status_line, warning_lines
+from .linear import linear_model, residual_lags
 
-__all__ = ["identification_sections", "bode_section", "identification_html"]
-
-def _ci(p) -> str:
-    return "" if not p.ci95 else f"[{p.ci95[0]:.6g}, {p.ci95[1]:.6g}]"
-
-
-def _warnings(outcome) -> list[str]:
-    notes = []
-    if outcome.converged is False:
-        notes.append(f"not converged: {outcome.message} (raise --max-iter, or start closer)")
-    shown = {outcome.multistart.message} if outcome.multistart else set()
-    notes += [w for w in outcome.warnings if w not in shown]
-    return notes
+__all__ = ["identification_sections", "bode_section", "identification_html", "status_paragraphs"]
 
 
-def _result_tables(outcome, fixed_from: Sequence[str]) -> list[str]:
-    rows = [[name, p.init, p.value, _ci(p), p.unit or "",
-             ("fixed" + (" (from result)" if name in fixed_from else "")) if p.fixed else "identified"]
-            for name, p in outcome.parameters.items()]
-    parts = [section("Parameters", [table(["parameter", "initial", "identified", "95 % interval", "unit", ""],
-                                          rows, left=1)], "parameters")]
-    if outcome.curves:
-        curve_rows = [[block, len(w.a), "fixed" if w.fixed else "learned", w.slope_at_zero]
-                      for block, w in outcome.curves.items()]
-        parts.append(section("Learned curves", [
-            paragraph("y = Σ vᵢ tanh(aᵢ x [+ bᵢ]) per block; the slope at 0 is Σ vᵢ aᵢ."),
-            table(["block", "tanh neurons", "", "slope at 0"], curve_rows, left=1, digits=4)], "curves"))
-    fit_rows = []
-    for which, m in (("training", outcome.fit.train), ("validation", outcome.fit.validation)):
-        if m:
-            fit_rows += [[which, name, m.cost, m.rms[name], m.fit_percent[name], m.rows] for name in m.rms]
-    parts.append(section("Fit", [paragraph("fit % = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖), free run of the identified "
-                                           "network; cost E of eq. (4)."),
-                                 table(["record", "output", "cost E", "RMS", "fit %", "rows"], fit_rows, left=2,
-                                       digits=5)], "fit"))
-    return parts
-
-
-def bode_section(diagram, problem, x, record=None) -> str | None:
-    """The Bode figure of `diagram` linearised at the RMS of its states over the free run of the record, over
-    Welch's H1 from `record` (a Dataset; default the fitted inputs and targets); None when the chart has no
-    input or output, or cannot be linearised (the reason is then a paragraph)."""
-    if not diagram.input_names or not diagram.output_names:
-        return None
-    states = {b.name for b in diagram.blocks if b.kind == "integrator"}
-    with np.errstate(all="ignore"):
-        signals = dict(problem.compiled.signals(x, problem.inputs, problem.init))
-    at = {name: float(f"{np.sqrt(np.mean(np.square(v))):.3g}") for name, v in signals.items()
-          if name in states and np.all(np.isfinite(v))}
-    try:
-        model = linearize(diagram, at)
-    except (SdnnError, ValueError) as exc:
-        return section("Frequency response", [paragraph(f"not drawn: {exc}", "warn")], "bode")
-    if model.A.size == 0:
-        return None
+def bode_section(outcome, model, reason: str = "", record=None) -> str | None:
+    """The Bode figure of the linearised chart `model` over Welch's H1 from `record` (a Dataset; default the
+    fitted inputs and targets); without a model the reason is a paragraph, or nothing when the chart has
+    neither input nor output."""
+    diagram, problem = outcome.diagram, outcome.problem
+    if model is None:
+        if not diagram.input_names or not diagram.output_names or reason == "the chart has no state":
+            return None
+        return section("Frequency response", [paragraph(f"not drawn: {reason}", "warn")], "bode")
     estimates = []
     for o in model.outputs:
         for i in model.inputs:
@@ -99,67 +63,104 @@ def bode_section(diagram, problem, x, record=None) -> str | None:
     return section("Frequency response", [*notes, figure(bode_figure(model, estimates), "Bode plot")], "bode")
 
 
-def identification_sections(outcome, records=(), validation=(), fixed_from: Sequence[str] = ()) -> list[str]:
-    """The report's sections for one identification: tables, then compare, residual and Bode figures.
+def _fallback_residual(outcome):
+    """Without records: the first training record as the problem holds it, with its own values."""
+    problem = outcome.problem
+    with np.errstate(all="ignore"):
+        yhat = problem.compiled.simulate(record_theta(outcome, 0), problem.inputs, problem.init)
+    return [("training", problem.targets - yhat, problem.inputs)]
 
-    `records` and `validation` are (label, Dataset, score_from) as for
-    :func:`.identify_plots.write_plots`.
+
+def identification_sections(outcome, records=(), validation=(), fixed_from: Sequence[str] = (),
+                            lags: int | None = None) -> list[str]:
+    """The report's sections for one identification: tables, then curve, compare, residual and Bode figures.
+
+    `records` (the training records in the order they were fitted) and `validation` are
+    (label, Dataset, score_from) as for :func:`.identify_plots.write_plots`. `lags` of the residual analysis:
+    default from the dynamics (:func:`flowchart2sdnn.analysis.response.lags_for`).
     """
-    parts = _result_tables(outcome, fixed_from)
+    parts = parameter_sections(outcome, fixed_from)
+    labels, checks = [r[0] for r in records], [v[0] for v in validation]
+    parts.append(fit_section(outcome, labels, checks))
     problem, x = outcome.problem, outcome.x
     if problem is None or x is None:
         return parts
     names, inputs = list(problem.compiled.output_names), list(problem.compiled.input_names)
-    units = signal_units(outcome.diagram)
-    every = [*records, *validation]
-    if every:
-        comparison = compare_records(problem.compiled, x, every, problem.alignment, None, outcome.diagram)
-        parts.append(section("Measured and model output", [figure(
-            compare_figure(comparison, f"{outcome.diagram.name}: measured and model output (free run)"),
-            "Every training and validation record: fit % and RMS in the legend, a zoom on the largest error.",
-            "compare")], "compare"))
-    with np.errstate(all="ignore"):
-        yhat = problem.compiled.simulate(x, problem.inputs, problem.init)
-    residuals = [("training", problem.targets - yhat, problem.inputs)]
-    if validation and every:
-        rec, (label, data, _) = comparison.records[len(records)], validation[0]
-        e = np.column_stack([rec.measured[n] - rec.model[n] for n in names])
-        residuals.append((label, e, resid_inputs(data, inputs, rec.rows, problem.alignment)))
-    figs = []
+    if outcome.curves:
+        parts.append(section("Learned curves over their data", [
+            figure(curve_figure(outcome, block, w), f"Learned curve {block} over the range its input covered "
+                   "in the training record (shaded).", f"curve {block}") for block, w in outcome.curves.items()],
+            "curve-figures"))
+    comparison = compare_fit(outcome, records, validation) if records or validation else None
+    if comparison is not None:
+        fits = "; ".join(f"{r.label}, {n}: fit {fit_number(r.fit_percent[n])} %" for r in comparison.records
+                         for n in names)
+        parts.append(section("Measured and model output", [
+            figure(compare_figure(comparison, f"{outcome.diagram.name}: measured and model output (free run)"),
+                   f"Every training and validation record, each run with the parameters of its fit table row "
+                   f"({fits}); a zoom on the largest error.", "compare"),
+            figure(residual_time_figure(comparison), "The residual, measured minus model, over time.",
+                   "residual over time")], "compare"))
+        given = [*records, *validation]
+        shown = [0] + list(range(len(records), len(given)))  # the first training record, every validation one
+        residuals = []
+        for i in shown:
+            if i < len(comparison.records):
+                rec, data = comparison.records[i], given[i][1]
+                e = np.column_stack([rec.measured[n] - rec.model[n] for n in names])
+                residuals.append((rec.label, e, resid_inputs(data, inputs, rec.rows, problem.alignment)))
+    else:
+        residuals = _fallback_residual(outcome)
+    model, reason = linear_model(outcome) if outcome.online is None else (None, "")
+    lags, why = residual_lags(outcome, min(e.shape[0] for _, e, _ in residuals), lags, model)
+    figs, units = [], signal_units(outcome.diagram)
     for label, e, u in residuals:
         for j, name in enumerate(names):
             if e.shape[0] >= 3 and np.all(np.isfinite(e[:, j])):
-                figs.append(figure(resid_figure(e[:, j], u, name, inputs, label, units.get(name)),
-                                   f"Residual analysis of {name} ({label}): autocorrelation and cross-correlation "
-                                   "with each input, 99 % band of a white residual independent of the input.",
-                                   f"resid {name} {label}"))
+                said = verdict(e[:, j], u, name, inputs, lags)
+                figs.append(figure(resid_figure(e[:, j], u, name, inputs, label, units.get(name), lags,
+                                                sample_time=outcome.diagram.sample_time),
+                                   f"Residual analysis of {name} ({label}): {said}. Autocorrelation and "
+                                   "cross-correlation with each input, 99 % band of a white residual independent "
+                                   f"of the input; {lags} lags ({why}).", f"resid {name} {label}"))
     if figs:
         parts.append(section("Residual analysis", figs, "resid"))
     if outcome.online is None:
-        bode = bode_section(outcome.diagram, problem, x, records[0][1] if records else None)
+        bode = bode_section(outcome, model, reason, records[0][1] if records else None)
         if bode:
             parts.append(bode)
     return parts
 
 
+def status_paragraphs(outcome, printed: Sequence[str] = ()) -> list[str]:
+    """The status line (the rule that stopped the fit) and every warning the command line printed: the
+    result's own (as the text summary lists them) and `printed`, the ones it printed beside them."""
+    notes = list(dict.fromkeys([*warning_lines(outcome), *printed]))
+    if outcome.converged is True:
+        rule = "converged"
+    elif outcome.converged is False:
+        rule = "not converged"
+    else:
+        rule = "no convergence test applies"
+    parts = [paragraph(f"{status_line(outcome)} ({rule})", "warn" if notes or outcome.converged is False else "ok")]
+    parts += [paragraph(f"warning: {w}", "warn") for w in notes]
+    ms = outcome.multistart
+    if ms and ms.n > 1:
+        parts.append(paragraph(f"multi-start: {ms.n} starts, best #{ms.best_index}; {ms.message}"))
+    return parts
+
+
 def identification_html(outcome, records=(), validation=(), fixed_from: Sequence[str] = (),
-                        command: str = "") -> str:
-    """The whole page of one identification (see the module docstring)."""
+                        command: str = "", printed: Sequence[str] = (), lags: int | None = None) -> str:
+    """The whole page of one identification (see the module docstring). `command` is the command line that
+    reproduces the run; `printed` the warnings the command line printed beside the result's own."""
     d = outcome.diagram
     head = [paragraph(d.description)] if d.description else []
     if command:
         head.append(f"<p>command: <code>{esc(command)}</code></p>")
-    state = f"status: {outcome.status}" + (f" - {outcome.message}" if outcome.message else "")
-    notes = _warnings(outcome)
-    head.append(paragraph(state, "warn" if notes else "ok"))
-    head += [paragraph(f"warning: {w}", "warn") for w in notes]
-    ms = outcome.multistart
-    if ms and ms.n > 1:
-        head.append(paragraph(f"multi-start: {ms.n} starts, best #{ms.best_index}; {ms.message}"))
+    head += status_paragraphs(outcome, printed)
     files = ", ".join(Path(r.file).name for r in outcome.data.train_records if r.file)
     subtitle = f"identification of chart '{d.name}'" + (f" on {files}" if files else "")
     return page(f"{d.name}: identification", [*head, *identification_sections(outcome, records, validation,
-                                                                               fixed_from), chart_section(d)],
+                                                                               fixed_from, lags), chart_section(d)],
                 subtitle)
-
-

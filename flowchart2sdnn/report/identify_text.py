@@ -7,16 +7,29 @@ from collections.abc import Sequence
 from ..identify.result import Identification
 from ..tables import table
 
-__all__ = ["format_result"]
+__all__ = ["format_result", "status_line", "warning_lines"]
 
 
 def _g(x) -> str:
     return "" if x is None else f"{x:.6g}"
 
 
+def status_line(result: Identification) -> str:
+    """The status as the summary's first line says it: the optimizer's status word (the rule that stopped it)
+    and its sentence."""
+    return f"status: {result.status}" + (f" - {result.message}" if result.message else "")
+
+
+def warning_lines(result: Identification) -> list[str]:
+    """The warnings the summary prints, in its order (the multi-start message is its own line, not repeated);
+    the HTML page shows the same list."""
+    shown = {result.multistart.message} if result.multistart else set()
+    return [w for w in result.warnings if w not in shown]
+
+
 def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str:
     """The parameter table, learned curves, fit table, multi-start line and warnings, as text."""
-    out = [f"status: {result.status}" + (f" - {result.message}" if result.message else "")]
+    out = [status_line(result)]
     rows = []
     for name, p in result.parameters.items():
         ci = f"[{_g(p.ci95[0])}, {_g(p.ci95[1])}]" if p.ci95 else ""
@@ -62,10 +75,7 @@ def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str
     if ms and ms.n > 1:
         out.append("")
         out.append(f"multi-start: {ms.n} starts, best #{ms.best_index}; {ms.message}")
-    shown = {ms.message} if ms else set()
-    for w in result.warnings:
-        if w not in shown:
-            out.append(f"warning: {w}")
+    out += [f"warning: {w}" for w in warning_lines(result)]
     return "\n".join(out) + "\n"
 
 
