@@ -9,6 +9,8 @@ and the public API call it. Modules:
 * :mod:`.canvas`: one figure on its own Agg canvas (no pyplot), PNG bytes written atomically
 * :mod:`.figures` (compare, residual analysis), :mod:`.bode`, :mod:`.identify_plots`, :mod:`.diagnose_plots`,
   :mod:`.drift` (the fleet report): the figures
+* :mod:`.notebook`: what a notebook shows of an identification or a diagnosis (one line, a short text, an HTML
+  fragment)
 
 Importing the package is cheap (matplotlib and the modules above load on first use); it registers the
 drawing that ``Identification.compare(plot=)`` delegates to and the notebook views (``repr``, ``summary()``,
