@@ -8,6 +8,8 @@ chart that lacks the friction (tests/data/diagnose); one round, two effects, so 
 from __future__ import annotations
 
 import json
+import re
+from pathlib import Path
 
 import pytest
 from click.testing import CliRunner
@@ -21,6 +23,7 @@ from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
 from flowchart2sdnn.diagnose.result import Diagnosis
 from flowchart2sdnn.errors import SdnnError
 
+GUIDE = Path(__file__).resolve().parents[1] / "docs" / "guide" / "diagnose.md"
 EXCITATION = {"amplitude": (-6.0, 6.0), "relay_level": 3.0, "relay_switch": 1.0, "relay_band": 0.2}
 EFFECTS = [BUILTIN_EFFECTS[n] for n in ("friction", "damping")]
 
@@ -53,6 +56,34 @@ def test_the_typed_parts_are_the_documents_keys(traced):
     assert d.before.validation_rms == doc["before"]["validation_rms"] > d.after.validation_rms
     assert d.identification.values == {k: v["value"] for k, v in doc["final"]["parameters"].items()}
     assert d.whiteness[0].white is doc["whiteness"]["before"]["white"]
+
+
+def _documented() -> str:
+    text = GUIDE.read_text(encoding="utf-8")
+    return text[text.index("## REPORT.json"):text.index("How well diagnose finds")]
+
+
+def _braced(section: str, key: str) -> set[str]:
+    """The names the guide lists in braces after `key` (``first_fit` `{converged, status, ...}``)."""
+    found = re.search(rf"`{key}`\s*\(?\[?`?\{{([^}}]*)\}}", section)
+    assert found, f"the guide no longer lists the keys of {key}"
+    listed = re.sub(r"\([^)]*\)", "", found.group(1))  # a name's explanation in parentheses is not a name
+    return {w.strip(" `\n") for w in listed.split(",")}
+
+
+def test_the_document_has_the_keys_the_guide_documents(traced):
+    # the user guide is the contract users' scripts were written against: every key it names is written
+    section = _documented()
+    doc = traced.report
+    top = {"candidates", "rounds", "accepted", "final", "before", "after", "whiteness", "stop", "last_round",
+           "n_accepted", "first_fit", "settings", "timing"}
+    assert all(f"`{k}`" in section for k in top)
+    # beside them: the format tag, the interrupted flag (the `interrupted` stop), the notes and the command line
+    assert top <= set(doc) and set(doc) - top <= {"format", "version", "interrupted", "data_notes", "command"}
+    assert set(doc["first_fit"]) == _braced(section, "first_fit")
+    assert all(set(a) == _braced(section, "accepted") for a in doc["accepted"])
+    rounds = {k.split("/")[0] for k in _braced(section, "rounds")} | {"after"}
+    assert all(rounds <= set(r) for r in doc["rounds"]), rounds - set(doc["rounds"][0])
 
 
 def test_a_document_reads_back_unchanged(traced):
