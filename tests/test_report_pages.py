@@ -209,3 +209,24 @@ def test_the_lags_span_the_slowest_mode():
     assert lags_for([{"pole": complex(-2.0, 0.0), "damped_hz": 0.0}], 0.01, 200)[0] == 40  # a fifth of 200
     assert lags_for([{"pole": complex(-500.0, 0.0), "damped_hz": 0.0}], 0.01, 20000)[0] == 25
     assert lags_for([{"pole": complex(0.0, 0.0), "damped_hz": 0.0}], 0.01, 20000)[0] == 25  # nothing stable
+
+
+def test_the_verdict_in_words_follows_the_residual():
+    """The words count the lags outside the band as the textbook formula does (r(k) = Σ ẽ(t) ẽ(t-k) / (N var e),
+    band 2.576/√N) and say "white" only when none is; a residual that is the input one sample late reads
+    "correlated with" it at lag 1; a random walk is "not white" at every lag."""
+    from flowchart2sdnn.report.figures import verdict
+
+    rng = np.random.default_rng(4)
+    u = rng.standard_normal(4000)
+    for seed in range(5):
+        e = np.random.default_rng(10 + seed).standard_normal(4000)
+        d = e - e.mean()
+        outside = sum(abs(d[k:] @ d[:-k] / (d @ d)) > 2.5758293 / np.sqrt(4000) for k in range(1, 26))
+        said = verdict(e, u, "w", ["M"], 25)
+        assert said.startswith(("white" if outside == 0 else "not white") + f" ({outside} of 25 lags outside"), said
+    e = rng.standard_normal(4000)
+    late = np.concatenate([[0.0], u[:-1]]) + 0.1 * e
+    said = verdict(late, u, "w", ["M"], 25)
+    assert "correlated with M" in said and "largest at lag 1)" in said
+    assert verdict(np.cumsum(e), u, "w", ["M"], 25).startswith("not white (25 of 25 lags outside")
