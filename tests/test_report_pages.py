@@ -117,6 +117,22 @@ class _Dom(HTMLParser):
                 part.append(data)
 
 
+def _fit_table(dom: _Dom) -> list[list[str]]:
+    return next(t for t in dom.tables if t and t[0][:5] == ["record", "output", "cost E", "RMS", "fit %"])
+
+
+def _table_fits(dom: _Dom) -> dict:
+    """{(record, output): fit %} of the fit table, one row per record (the pooled row left out)."""
+    return {(row[0], row[1]): row[4] for row in _fit_table(dom)[1:] if row[6] != "pooled"}
+
+
+def _figure_fits(dom: _Dom) -> dict:
+    """{(record, output): fit %} as the compare figure's caption gives them (the numbers its legend draws)."""
+    compare = next(c for c in dom.captions if c.startswith("Every training and validation record"))
+    return {(label, output): value
+            for label, output, value in re.findall(r"(?:\(|; )([^;()]+?), (\w+): fit (\S+) %", compare)}
+
+
 def _rendered(page: Path) -> _Dom:
     """The page's DOM as headless Chromium built it."""
     done = subprocess.run([CHROMIUM, "--headless", "--no-sandbox", "--disable-gpu", "--dump-dom", page.as_uri()],
@@ -131,15 +147,11 @@ def _rendered(page: Path) -> _Dom:
 def test_each_records_figure_shows_the_fit_of_its_table_row(records, monkeypatch):
     page, _, _ = _identify(records, monkeypatch)
     dom = _rendered(page)
-    fit = next(t for t in dom.tables if t and t[0][:5] == ["record", "output", "cost E", "RMS", "fit %"])
-    table = {(row[0], row[1]): row[4] for row in fit[1:] if row[6] != "pooled"}
-    compare = next(c for c in dom.captions if c.startswith("Every training and validation record"))
-    drawn = {(label, output): value
-             for label, output, value in re.findall(r"(?:\(|; )([^;()]+?), (\w+): fit (\S+) %", compare)}
+    table = _table_fits(dom)
     assert set(table) == {(f"training: r{k}.csv", "w") for k in (1, 2, 3)} | {("validation: val.csv", "w")}
-    assert drawn == table
-    # the validation row is scored after its fitted initial-state window, and says so
-    assert [row[5] for row in fit[1:] if row[0] == "validation: val.csv"] == ["250"]
+    assert _figure_fits(dom) == table
+    # the validation row is scored after its fitted initial-state window
+    assert [row[5] for row in _fit_table(dom)[1:] if row[0] == "validation: val.csv"] == ["250"]
 
 
 def test_the_page_shows_every_warning_the_identify_command_printed(records, monkeypatch):
@@ -165,7 +177,7 @@ def test_the_page_shows_every_warning_and_note_the_diagnose_command_printed(tmp_
     (tmp_path / "train.csv").write_text((tmp_path / "train.csv").read_text().replace(",", ";"))
     args = ["diagnose", str(tmp_path / "train.csv"), "--diagram", str(DATA / "one_mass.yaml"), "--validate",
             str(tmp_path / "val.csv"), "--effects", "friction,damping", "--rounds", "1", "--max-iter", "3",
-            "--allow-unconverged", "--html", str(tmp_path / "d.html")]
+            "--allow-unconverged", "--init-window", "100", "--html", str(tmp_path / "d.html")]
     code, printed = _run(args, monkeypatch)
     assert code == 0, "\n".join(printed)
     said = [line.split(f"{kind}: ", 1)[1] for line in printed for kind in ("warning", "note")
@@ -178,6 +190,10 @@ def test_the_page_shows_every_warning_and_note_the_diagnose_command_printed(tmp_
     assert final in text
     assert "the first fit of the chart as given did not converge: max_iter" in text  # --max-iter 3 stopped it
     assert "stopped: " in text and f"command: {shlex.join(['sdnn', *args])}" in text
+    # the final chart's figures show the fit % of its table, the validation as diagnose scored it (init window)
+    dom = _Dom()
+    dom.feed((tmp_path / "d.html").read_text())
+    assert _figure_fits(dom) == _table_fits(dom) and ("validation: val.csv", "v") in _table_fits(dom)
 
 
 def test_the_lags_span_the_slowest_mode():
@@ -193,3 +209,24 @@ def test_the_lags_span_the_slowest_mode():
     assert lags_for([{"pole": complex(-2.0, 0.0), "damped_hz": 0.0}], 0.01, 200)[0] == 40  # a fifth of 200
     assert lags_for([{"pole": complex(-500.0, 0.0), "damped_hz": 0.0}], 0.01, 20000)[0] == 25
     assert lags_for([{"pole": complex(0.0, 0.0), "damped_hz": 0.0}], 0.01, 20000)[0] == 25  # nothing stable
+
+
+def test_the_verdict_in_words_follows_the_residual():
+    """The words count the lags outside the band as the textbook formula does (r(k) = Σ ẽ(t) ẽ(t-k) / (N var e),
+    band 2.576/√N) and say "white" only when none is; a residual that is the input one sample late reads
+    "correlated with" it at lag 1; a random walk is "not white" at every lag."""
+    from flowchart2sdnn.report.figures import verdict
+
+    rng = np.random.default_rng(4)
+    u = rng.standard_normal(4000)
+    for seed in range(5):
+        e = np.random.default_rng(10 + seed).standard_normal(4000)
+        d = e - e.mean()
+        outside = sum(abs(d[k:] @ d[:-k] / (d @ d)) > 2.5758293 / np.sqrt(4000) for k in range(1, 26))
+        said = verdict(e, u, "w", ["M"], 25)
+        assert said.startswith(("white" if outside == 0 else "not white") + f" ({outside} of 25 lags outside"), said
+    e = rng.standard_normal(4000)
+    late = np.concatenate([[0.0], u[:-1]]) + 0.1 * e
+    said = verdict(late, u, "w", ["M"], 25)
+    assert "correlated with M" in said and "largest at lag 1)" in said
+    assert verdict(np.cumsum(e), u, "w", ["M"], 25).startswith("not white (25 of 25 lags outside")

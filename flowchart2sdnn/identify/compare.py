@@ -199,7 +199,8 @@ def record_theta(ident, k: int) -> np.ndarray:
 
 
 def compare_fit(ident, records: Sequence[tuple[str, Dataset, int]],
-                validation: Sequence[tuple[str, Dataset, int]] = ()) -> Comparison:
+                validation: Sequence[tuple[str, Dataset, int]] = (), init_window: int | None = None,
+                record_params: Sequence[str] | None = None) -> Comparison:
     """The records of the fit `ident` compared as its fit table scored them (a figure beside the table must
     show the table's numbers).
 
@@ -207,17 +208,21 @@ def compare_fit(ident, records: Sequence[tuple[str, Dataset, int]],
     record k runs with :func:`record_theta` (its own per-record values). A `validation` record runs with the
     identified chart (per-record parameters at their mean), or, when the fit had ``init_window`` n, from the
     initial state and per-record values fitted on its first n rows (as identify fitted them: the same
-    deterministic fit) and is scored from row n.
+    deterministic fit) and is scored from row n. A caller that scored the validation records itself says how:
+    `init_window` (default the fit's own, none after a split) and the per-record parameters fitted on the
+    window with the states (`record_params`, default all of them; diagnose fits none).
     """
     problem, settings = ident.problem, ident.settings
     compiled, alignment = problem.compiled, settings.alignment
     out = [_one(compiled, record_theta(ident, k), label, data, alignment, None, score_from)
            for k, (label, data, score_from) in enumerate(records)]
+    window = (settings.init_window if settings.split is None else 0) if init_window is None else init_window
+    params = problem.record_params if record_params is None else tuple(record_params)
     for label, data, score_from in validation:
         theta, history = ident.x, None
-        if settings.init_window and settings.split is None:
-            state = estimate_initial_state(compiled, ident.x, data, alignment, settings.init_window,
-                                           data_init(problem.network, data), params=problem.record_params)
-            theta, history, score_from = state.theta, state.history, max(score_from, settings.init_window)
+        if window:
+            state = estimate_initial_state(compiled, ident.x, data, alignment, window,
+                                           data_init(problem.network, data), params=params)
+            theta, history, score_from = state.theta, state.history, max(score_from, window)
         out.append(_one(compiled, theta, label, data, alignment, None, score_from, history))
     return Comparison(tuple(out), None, tuple(compiled.output_names), signal_units(ident.chart))

@@ -18,6 +18,7 @@ from pathlib import Path
 
 from ..data.csvdata import Dataset
 from ..diagnose.loop import Diagnosis
+from ..identify.result import Metrics
 from .diagnose_plots import figures
 from .diagnose_text import STOP_MESSAGES, _candidate_rows, _fit_pct
 from .html import chart_section, esc, figure, page, paragraph, section, table
@@ -135,12 +136,18 @@ def diagnosis_html(diagnosis: Diagnosis, train: Dataset, validation: Sequence[Da
     final = diagnosis.final.identification
     records = [(f"training: {Path(train.path).name}", train, 0)]
     split = report["settings"].get("split")
+    window = report["settings"].get("init_window") or 0
     checks = [(f"validation: {Path(v.path).name}", v, 0) for v in validation]
     if split is not None:
         n = max(3, int(round(split * train.n_rows)))
         records = [(records[0][0], train.slice(0, n), 0)]
         checks = [(f"validation: {Path(train.path).name} after the split", train, n)]
-    final_parts = identification_sections(final, records, checks, lags=lags)
+    # the final chart's validation as diagnose scored it (its own init window, no per-record values fitted)
+    note = ("free run over the whole record, scored after the split" if split is not None else
+            f"free run from the initial state fitted on the first {window} samples" if window else None)
+    scored = [Metrics(m["rows"], m["cost"], dict(m["rms"]), dict(m["fit_percent"]), note=note)
+              for m in diagnosis.final.validation.get("records", [])]
+    final_parts = identification_sections(final, records, checks, lags=lags, scored=(scored, window, ()))
     parts.append(section("Final chart", [paragraph(f"'{diagnosis.diagram.name}' with the accepted effects, "
                                                    "identified:")], "final"))
     parts += final_parts

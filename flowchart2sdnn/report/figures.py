@@ -114,8 +114,8 @@ def verdict(residual: np.ndarray, inputs: np.ndarray, output: str, input_names: 
     words = [f"{'white' if w['white'] else 'not white'} ({auto['outside']} of {max_lag} lags outside the "
              f"{100 * level:g} % band"
              + ("" if w["white"] else f", largest |r| {auto['max_abs']:.2f} at lag {auto['lag_of_max']}") + ")"]
-    for name, c in w["cross_correlation"][output].items():
-        ok = c["outside"] <= int(0.01 * (2 * max_lag + 1))
+    for i, (name, c) in enumerate(w["cross_correlation"][output].items()):
+        ok = whiteness(e[:, None], u[:, [i]], [output], [name], max_lag, level)["independent"]  # this input alone
         words.append(f"{'independent of' if ok else 'correlated with'} {name} ({c['outside']} of "
                      f"{2 * max_lag + 1} lags outside" + ("" if ok else f", largest at lag {c['lag_of_max']}") + ")")
     return "; ".join(words)

@@ -72,16 +72,19 @@ def _fallback_residual(outcome):
 
 
 def identification_sections(outcome, records=(), validation=(), fixed_from: Sequence[str] = (),
-                            lags: int | None = None) -> list[str]:
+                            lags: int | None = None, scored: tuple | None = None) -> list[str]:
     """The report's sections for one identification: tables, then curve, compare, residual and Bode figures.
 
     `records` (the training records in the order they were fitted) and `validation` are
     (label, Dataset, score_from) as for :func:`.identify_plots.write_plots`. `lags` of the residual analysis:
-    default from the dynamics (:func:`flowchart2sdnn.analysis.response.lags_for`).
+    default from the dynamics (:func:`flowchart2sdnn.analysis.response.lags_for`). `scored`, for a caller that
+    scored the validation records itself (diagnose): (Metrics per validation record, init_window,
+    per-record parameters fitted on the window), so that table and figures show its numbers.
     """
     parts = parameter_sections(outcome, fixed_from)
     labels, checks = [r[0] for r in records], [v[0] for v in validation]
-    parts.append(fit_section(outcome, labels, checks))
+    metrics, window, params = scored if scored is not None else (None, None, None)
+    parts.append(fit_section(outcome, labels, checks, metrics))
     problem, x = outcome.problem, outcome.x
     if problem is None or x is None:
         return parts
@@ -91,7 +94,7 @@ def identification_sections(outcome, records=(), validation=(), fixed_from: Sequ
             figure(curve_figure(outcome, block, w), f"Learned curve {block} over the range its input covered "
                    "in the training record (shaded).", f"curve {block}") for block, w in outcome.curves.items()],
             "curve-figures"))
-    comparison = compare_fit(outcome, records, validation) if records or validation else None
+    comparison = compare_fit(outcome, records, validation, window, params) if records or validation else None
     if comparison is not None:
         fits = "; ".join(f"{r.label}, {n}: fit {fit_number(r.fit_percent[n])} %" for r in comparison.records
                          for n in names)

@@ -88,10 +88,14 @@ def _correlation(u) -> str:
     return "\n".join(parts)
 
 
-def fit_rows(outcome, labels: Sequence[str] = (), validation_labels: Sequence[str] = ()) -> list[list]:
+def fit_rows(outcome, labels: Sequence[str] = (), validation_labels: Sequence[str] = (),
+             validation_metrics: Sequence | None = None) -> list[list]:
     """[record, output, cost E, RMS, fit %, rows, how] per scored record and output: each training record under
-    its label (and all of them pooled when several), then the validation record."""
-    train, val = outcome.fit.train, outcome.fit.validation
+    its label (and all of them pooled when several), then each validation record: the result's own, or
+    `validation_metrics` (Metrics, one per validation label) where the caller scored them (diagnose)."""
+    train = outcome.fit.train
+    vals = ([outcome.fit.validation] if outcome.fit.validation is not None else []) if validation_metrics is None \
+        else list(validation_metrics)
     rows = []
     per = list(train.records) if train.records else [train]
     for k, m in enumerate(per):
@@ -101,15 +105,16 @@ def fit_rows(outcome, labels: Sequence[str] = (), validation_labels: Sequence[st
     if train.records:
         rows += [[f"training, all {len(per)} records", name, train.cost, train.rms[name],
                   fit_number(train.fit_percent[name]), train.rows, "pooled"] for name in train.rms]
-    if val is not None:
-        label = validation_labels[0] if validation_labels else "validation"
+    for k, val in enumerate(vals):
+        label = validation_labels[k] if k < len(validation_labels) else f"validation record {k + 1}"
         rows += [[label, name, val.cost, val.rms[name], fit_number(val.fit_percent[name]), val.rows, val.note or ""]
                  for name in val.rms]
     return rows
 
 
-def fit_section(outcome, labels: Sequence[str] = (), validation_labels: Sequence[str] = ()) -> str:
-    rows = fit_rows(outcome, labels, validation_labels)
+def fit_section(outcome, labels: Sequence[str] = (), validation_labels: Sequence[str] = (),
+                validation_metrics: Sequence | None = None) -> str:
+    rows = fit_rows(outcome, labels, validation_labels, validation_metrics)
     return section("Fit", [paragraph("fit % = 100 (1 − ‖y − ŷ‖ / ‖y − ȳ‖), free run of the identified network "
                                      "(each training record with its own per-record values); cost E of eq. (4)."),
                            table(["record", "output", "cost E", "RMS", "fit %", "rows", "how"], rows, left=2,
