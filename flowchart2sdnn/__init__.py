@@ -8,7 +8,8 @@ The public API (see the README's "Python API"):
 * :func:`load_chart`, :func:`compile_chart`: a chart file -> :class:`Diagram` -> compiled network
 * :func:`read_csv`, :func:`dataset_from_frame`: measured records (:class:`Dataset`)
 * :func:`identify` -> :class:`Identification` (``.parameters``, ``.chart``, ``.simulate()``, ``.to_json()``)
-* :func:`diagnose` -> :class:`Diagnosis`; :func:`read_result` reads a RESULT.json back
+* :func:`diagnose` -> :class:`Diagnosis`; :func:`read_result` reads a RESULT.json back, :func:`read_report` a
+  REPORT.json
 
 Names are imported on first use, so ``import flowchart2sdnn`` (and the command line) stays fast.
 """
@@ -19,11 +20,14 @@ import importlib
 
 from . import diagnose as _diagnose_package  # noqa: F401
 from . import identify as _identify_package  # noqa: F401
+from . import report as _report_package  # noqa: F401  (registers the drawing results delegate to; cheap)
 from ._version import __version__
 
-# The subpackages identify/ and diagnose/ are imported above (cheap: their modules load on first use) so that
-# the functions below, bound after them, keep the names `identify` and `diagnose` whatever is imported later.
-# Reach the subpackages' modules with `from flowchart2sdnn.identify import run`.
+# The subpackages identify/ and diagnose/ are imported above (cheap: their modules load on first use); their
+# names are then taken back so that `identify` and `diagnose` here are the functions of api.py (loaded on first
+# use by __getattr__, with their own docstrings and signatures for help()). Reach the subpackages' modules with
+# `from flowchart2sdnn.identify import run`.
+del globals()["identify"], globals()["diagnose"]
 
 __all__ = [
     "__version__",
@@ -34,6 +38,7 @@ __all__ = [
     "identify",
     "diagnose",
     "read_result",
+    "read_report",
     "Diagram",
     "Dataset",
     "Compilation",
@@ -49,11 +54,11 @@ __all__ = [
 
 _HOME = {
     "load_chart": "api", "compile_chart": "api", "read_csv": "api", "dataset_from_frame": "api",
-    "read_result": "api",
+    "read_result": "api", "read_report": "api", "identify": "api", "diagnose": "api",
     "Diagram": "diagram.model", "Dataset": "data.csvdata", "Compilation": "compiler",
     "IdentifySettings": "identify.settings", "Identification": "identify.result", "Estimate": "identify.result",
     "Curve": "identify.result", "Metrics": "identify.result",
-    "DiagnoseSettings": "diagnose.loop", "Diagnosis": "diagnose.loop", "SdnnError": "errors",
+    "DiagnoseSettings": "diagnose.loop", "Diagnosis": "diagnose.result", "SdnnError": "errors",
 }
 
 
@@ -69,16 +74,3 @@ def __getattr__(name: str):
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(__all__))
 
-
-def identify(chart, data, validation=None, **settings):
-    """Identify a chart's physical parameters from measured records; see :func:`flowchart2sdnn.api.identify`."""
-    from .api import identify as run
-
-    return run(chart, data, validation, **settings)
-
-
-def diagnose(chart, data, validation=(), **settings):
-    """Find what a chart lacks from measured records; see :func:`flowchart2sdnn.api.diagnose`."""
-    from .api import diagnose as run
-
-    return run(chart, data, validation, **settings)

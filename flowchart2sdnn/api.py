@@ -17,6 +17,7 @@ from __future__ import annotations
 import csv
 import hashlib
 from collections.abc import Mapping, Sequence
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -25,16 +26,18 @@ from .compiler import Compilation, compile_diagram
 from .data.columns import source_header
 from .data.csvdata import TIME_COLUMNS, Dataset
 from .data.csvdata import read_csv as _read_csv_columns
+from .diagnose.document import read_report
 from .diagnose.loop import DiagnoseSettings, Diagnosis
 from .diagnose.loop import diagnose as _diagnose
 from .diagram.model import Diagram
 from .diagram.validate import load_diagram
-from .errors import SdnnError
+from .errors import Diagnostic, SdnnError, did_you_mean
 from .identify.document import read_result
 from .identify.result import Identification
 from .identify.run import identify as _identify
 
-__all__ = ["load_chart", "compile_chart", "read_csv", "dataset_from_frame", "identify", "diagnose", "read_result"]
+__all__ = ["load_chart", "compile_chart", "read_csv", "dataset_from_frame", "identify", "diagnose", "read_result",
+           "read_report"]
 
 
 def load_chart(path: str | Path) -> Diagram:
@@ -140,61 +143,159 @@ def dataset_from_frame(frame, time: str | None = None, inputs: Sequence[str] | N
 
 
 def identify(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset], validation: Dataset | None = None,
-             resample: bool = False, **settings) -> Identification:
-    """Identify the chart's physical parameters and learned curves from measured records.
+             resample: bool = False, fix_from: Identification | str | Path | None = None,
+             **settings) -> Identification:
+    """Identify the chart's physical parameters and learned curves from measured records (``sdnn identify``).
+
+    Parameters
+    ----------
+    chart : Diagram or path
+        The chart (:func:`load_chart`), or its YAML file.
+    data : Dataset or sequence of Dataset
+        The training record(s) (:func:`read_csv`, :func:`dataset_from_frame`), each with the chart's input and
+        output columns; several are fitted together, each simulated from its own initial state. A DataFrame is
+        not a record: SdnnError saying how to make one.
+    validation : Dataset, optional
+        A record to score the fit on (a record split at time gaps: its longest part).
+    resample : bool
+        Resample records of another rate onto the chart's sample time (``--resample``).
+    fix_from : Identification or path of a RESULT.json, optional
+        An earlier result whose matching parameters and learned curves are taken and kept fixed (the paper's
+        stages, ``--fix-from``); their names become the ``fixed_from`` setting.
+    **settings
+        The fields of :class:`~flowchart2sdnn.identify.settings.IdentifySettings` by name: ``starts=8, seed=1,
+        max_iter=300, split=0.7, online=True, alignment="zoh", shooting="auto", ...``; a bad value raises
+        ValueError naming it, an unknown name TypeError.
+
+    Returns
+    -------
+    Identification
+        ``.parameters[name]`` an :class:`~flowchart2sdnn.identify.result.Estimate` (value, stderr, ci95, unit),
+        ``.fit``, ``.status``, ``.warnings``, ``.chart`` the identified chart; ``.summary()``, ``.simulate(data)``,
+        ``.compare(data)``, ``.linearize()``, ``.parameters_table()``, ``.to_json()`` (RESULT.json).
 
     Each record's time column is checked against the chart's sample time first, as ``sdnn identify`` does
-    (:func:`~flowchart2sdnn.data.timebase.conform`: jitter snapped to the grid, a record split at its gaps,
-    with `resample` data of another rate resampled; each with a note among the answer's ``.warnings``).
-    `settings` are the fields of :class:`~flowchart2sdnn.identify.settings.IdentifySettings` by name
-    (``starts=8, seed=1, max_iter=300, split=0.7, online=True, ...``). The answer's ``.parameters`` maps each
-    name to an :class:`~flowchart2sdnn.identify.result.Estimate` (value, ci95, unit), ``.chart`` is the
-    identified chart, ``.simulate(data)`` runs it, ``.to_json()`` is the RESULT.json text.
+    (:func:`~flowchart2sdnn.data.timebase.conform`: jitter snapped to the grid, a record split at its gaps, with
+    `resample` data of another rate resampled; each with a note among the answer's ``.warnings``).
     """
     diagram = _chart(chart)
+    if fix_from is not None:
+        from .identify.document import fix_from_result
+
+        diagram, fixed = fix_from_result(diagram, fix_from)
+        settings.setdefault("fixed_from", tuple(fixed))
     train, val = prepared(diagram, data, validation, resample)
     return with_data_notes(_identify(diagram, train, val, **settings), [*train, *([val] if val else [])])
 
 
 def diagnose(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset],
-             validation: Sequence[Dataset] = (), resample: bool = False, **settings) -> Diagnosis:
-    """Trace the residual of a fit of `chart` to effects the chart lacks, add them, refit, report.
+             validation: Sequence[Dataset] = (), resample: bool = False, effects: Sequence[str] | None = None,
+             **settings) -> Diagnosis:
+    """Trace the residual of a fit of `chart` to effects the chart lacks, add them, refit, report
+    (``sdnn diagnose``).
 
-    The records' time columns are checked and prepared as for :func:`identify` (their notes in the report's
-    ``data_notes``). `settings` are the fields of :class:`~flowchart2sdnn.diagnose.loop.DiagnoseSettings` by
-    name (``rounds=2, seed=0, ...``). The answer's ``.diagram`` is the augmented chart, ``.report`` the
-    REPORT.json body.
+    Parameters
+    ----------
+    chart : Diagram or path
+        The chart as written (never modified).
+    data : Dataset or sequence of Dataset
+        The training record(s), with the chart's input and output columns.
+    validation : sequence of Dataset
+        Validation records; none: the last 30 % of a single training record (``split=0.7``).
+    resample : bool
+        Resample records of another rate onto the chart's sample time.
+    effects : sequence of str, optional
+        The built-in effects to try, by name (``["friction", "dead_time"]``, or ``"friction,dead_time"`` as
+        ``--effects``); default all. SdnnError naming an unknown one.
+    **settings
+        The fields of :class:`~flowchart2sdnn.diagnose.fitting.DiagnoseSettings` by name (``rounds=2, seed=0,
+        top=5, criterion="bic", ...``).
+
+    Returns
+    -------
+    Diagnosis
+        ``.accepted`` the effects added, ``.rounds``, ``.candidates``, ``.before`` / ``.after`` the error of the
+        chart as given and of the final chart, ``.identification`` the final fit, ``.diagram`` the augmented
+        chart, ``.warnings``; ``.summary()``, ``.candidates_table()``, ``.to_json()`` (REPORT.json), ``.report``
+        its body as a dict.
+
+    The records' time columns are checked and prepared as for :func:`identify` (their notes in ``data_notes``).
     """
     from .data.timebase import conform, record_notes
 
     diagram = _chart(chart)
-    records = [data] if isinstance(data, Dataset) else list(data)
+    records = _records(diagram, data, "data")
+    checked = _records(diagram, validation, "validation")
     train = [p for d in records for p in conform(d, diagram.sample_time, resample)]
-    val = [p for d in validation for p in conform(d, diagram.sample_time, resample)]
-    out = _diagnose(diagram, train, tuple(val), DiagnoseSettings(**settings))
+    val = [p for d in checked for p in conform(d, diagram.sample_time, resample)]
+    library = None
+    if effects is not None:
+        from .diagnose.effects import effect_library, select_effects
+
+        names = effects.split(",") if isinstance(effects, str) else list(effects)  # "friction,damping" as --effects
+        library = select_effects(names, effect_library(), "effects")
+    out = _diagnose(diagram, train, tuple(val), DiagnoseSettings(**settings), library)
     notes = record_notes([*train, *val])
-    if notes:
-        out.report["data_notes"] = list(notes)
-    return out
+    return replace(out, data_notes=tuple(notes)) if notes else out
 
 
 def prepared(diagram: Diagram, data: Dataset | Sequence[Dataset], validation: Dataset | None,
              resample: bool = False) -> tuple[list[Dataset], Dataset | None]:
     """The training records and the validation record on the chart's time base (data.timebase.conform); a
-    validation record split at gaps is its longest part (said in its notes)."""
+    validation record split at gaps is its longest part (said in its notes). SdnnError for data that are not
+    records or lack a column the chart needs."""
     from .data.timebase import conform, longest
 
-    records = [data] if isinstance(data, Dataset) else list(data)
+    records = _records(diagram, data, "data")
+    if validation is not None:
+        validation = _records(diagram, validation, "validation")[0]
     train = [p for d in records for p in conform(d, diagram.sample_time, resample)]
     val = None if validation is None else longest(conform(validation, diagram.sample_time, resample))
     return train, val
 
 
+def _records(diagram: Diagram, data, what: str) -> list[Dataset]:
+    """`data` (a record or a sequence of records) as a list, each checked: a record (not a DataFrame, a mapping
+    or a path) holding every column the chart reads."""
+    from .identify.problem import required_columns
+
+    items = [data] if isinstance(data, Dataset) or _not_a_sequence(data) else list(data)
+    needed = required_columns(diagram)
+    for item in items:
+        if not isinstance(item, Dataset):
+            raise SdnnError(_not_a_record(item, what))
+        missing = [c for c in needed if c not in item.columns]
+        if missing:
+            have = ", ".join(item.columns) or "none"
+            raise SdnnError.at("CSV012", f"column '{missing[0]}' is missing: chart '{diagram.name}' reads "
+                               f"{', '.join(needed)} (columns: {have})", item.path,
+                               hint=did_you_mean(missing[0], item.columns)
+                               or "rename with read_csv(..., map={name: header})")
+    return items
+
+
+def _not_a_sequence(data) -> bool:
+    # a DataFrame or a mapping iterates over its column names, a path over its characters: each one thing
+    return isinstance(data, (str, Path, Mapping)) or hasattr(data, "columns") or not hasattr(data, "__iter__")
+
+
+def _not_a_record(item, what: str) -> Diagnostic:
+    columns = [str(c) for c in item.columns] if hasattr(item, "columns") else \
+        [str(c) for c in item] if isinstance(item, Mapping) else []
+    listed = f" (columns: {', '.join(columns)})" if columns else ""
+    if columns:
+        hint = "make one with sd.dataset_from_frame(frame, time=..., inputs=[...], outputs=[...])"
+    elif isinstance(item, (str, Path)):
+        hint = "read the file with sd.read_csv(path)"
+    else:
+        hint = "make one with sd.read_csv(path) or sd.dataset_from_frame(frame, time=...)"
+    return Diagnostic("API001", "error", f"{what}: a {type(item).__name__} is not a record (Dataset){listed}",
+                      hint=hint)
+
+
 def with_data_notes(ident: Identification, records: Sequence[Dataset]) -> Identification:
     """`ident` with the records' data notes (time base, delimiter) before its own warnings, and after them the
     warning of a residual that follows a held input at lag 0 (identify.lagzero)."""
-    from dataclasses import replace
-
     from .data.timebase import record_notes
     from .identify.lagzero import lag_zero_warnings
 

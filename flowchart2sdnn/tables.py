@@ -2,9 +2,9 @@
 
 from __future__ import annotations
 
-from collections.abc import Sequence
+from collections.abc import Mapping, Sequence
 
-__all__ = ["table"]
+__all__ = ["table", "frame"]
 
 
 def table(headers: Sequence[str], rows: Sequence[Sequence[object]]) -> str:
@@ -23,3 +23,13 @@ def _fmt(value: object) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
     return "" if value is None else str(value)
+
+
+def frame(rows: Sequence[Mapping[str, object]], columns: Sequence[str]):
+    """`rows` as a pandas DataFrame with these columns when pandas is installed, else as a list of dicts (pandas
+    stays optional: the notebook tables are the same rows either way)."""
+    try:
+        import pandas
+    except ImportError:
+        return [dict(r) for r in rows]
+    return pandas.DataFrame([dict(r) for r in rows], columns=list(columns))

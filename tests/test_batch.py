@@ -15,7 +15,7 @@ import pytest
 from click.testing import CliRunner
 from fleet_data import TRUTH, write_chart, write_log
 
-from flowchart2sdnn.batch.drift import drift_table, load_fleet, parse_group, plots_available, write_report
+from flowchart2sdnn.batch.drift import drift_table, load_fleet, parse_group
 from flowchart2sdnn.batch.results import columns_for, parquet_available, read_results
 from flowchart2sdnn.batch.run import BatchSettings, run_batch
 from flowchart2sdnn.cli import main
@@ -23,6 +23,7 @@ from flowchart2sdnn.cli.batch import expand_files
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
 from flowchart2sdnn.identify.run import IdentifySettings
+from flowchart2sdnn.report.drift import plots_available, write_report
 
 REPO = Path(__file__).resolve().parents[1]
 FAST = BatchSettings(identify=IdentifySettings(max_iter=20))

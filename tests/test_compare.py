@@ -159,3 +159,20 @@ def test_identification_compare_from_a_result_file(case, tmp_path):
 
 def _network_of(result):
     return result.problem.compiled, result.x
+
+
+def test_compare_plot_delegates_to_the_report_and_draws_what_it_returns(case, tmp_path, monkeypatch):
+    """`plot=` (docs/guide/api.md) still draws, through the view report/ registered: the figure gets the very
+    Comparison the call returns, and the PNG is written."""
+    pytest.importorskip("matplotlib")
+    from flowchart2sdnn.report import figures
+
+    chart, csv, M, w = case
+    data = sd.read_csv(csv, chart=chart)
+    result = sd.identify(chart, data, max_iter=5)
+    seen = []
+    real = figures.write_compare
+    monkeypatch.setattr(figures, "write_compare", lambda c, path, name="": seen.append(c) or real(c, path, name))
+    out = result.compare({"rec": data}, plot=tmp_path / "c.png")
+    assert seen == [out]
+    assert (tmp_path / "c.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"

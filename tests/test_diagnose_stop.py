@@ -21,7 +21,7 @@ from flowchart2sdnn.cli import main
 from flowchart2sdnn.data.csvdata import write_csv
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose, whole_run_stop
-from flowchart2sdnn.diagnose.summary import STOP_MESSAGES, format_report
+from flowchart2sdnn.report.diagnose_text import STOP_MESSAGES, format_report
 
 NOISE = 0.02
 EXCITATION = {"amplitude": (-6.0, 6.0), "relay_level": 3.0, "relay_switch": 1.0, "relay_band": 0.2}

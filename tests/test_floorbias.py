@@ -21,7 +21,7 @@ from flowchart2sdnn.cli import main
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.identify.document import from_document
 from flowchart2sdnn.identify.run import with_floor_bias
-from flowchart2sdnn.identify.summary import format_result
+from flowchart2sdnn.report.identify_text import format_result
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 DIAGRAMS = Path(__file__).resolve().parents[1] / "diagrams"

@@ -37,16 +37,17 @@ def page(tmp_path_factory):
 
 def test_the_page_holds_the_tables_every_figure_and_the_warning(page):
     figures, text = read_page(page)
-    assert figures == ["compare", "resid w1 training", "resid w1 validation: idle.csv after the split", "Bode plot"]
+    assert figures == ["curve MR1", "compare", "residual over time", "resid w1 training: idle.csv",
+                       "resid w1 validation: idle.csv after the split", "Bode plot"]
     assert "engine: identification" in text
     assert "J1" in text and "kg*m^2" in text and "95 % interval" in text and "MR1" in text
     assert "warning: not converged" in text  # --max-iter 3 stops early, and the page says so
-    assert "training w1" in text and "validation w1" in text  # the fit table's rows
+    assert "training: idle.csv w1" in text and "validation: idle.csv after the split w1" in text  # the fit rows
     assert page.stat().st_size < 2_000_000
 
 
 def test_no_matplotlib_is_one_line_naming_html_before_any_work(tmp_path, monkeypatch):
-    plots = importlib.import_module("flowchart2sdnn.identify.plots")  # (sd.identify is the function)
+    plots = importlib.import_module("flowchart2sdnn.report.canvas")
 
     def missing(option="--plots"):
         raise SdnnError.at("PLOT001", f"{option} needs matplotlib, which is not installed", option)

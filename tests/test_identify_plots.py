@@ -64,7 +64,7 @@ def test_plots_offline_are_written_as_pngs(engine_csv, tmp_path):
 
 def test_plots_online_include_parameter_trajectories(engine_csv, tmp_path):
     pytest.importorskip("matplotlib")
-    from flowchart2sdnn.identify.plots import write_plots
+    from flowchart2sdnn.report.identify_plots import write_plots
 
     diagram = load_diagram(DIAGRAMS / "engine.yaml")
     ds = read_csv(engine_csv, required_columns(diagram), None, diagram.sample_time)
@@ -77,8 +77,8 @@ def test_plots_online_include_parameter_trajectories(engine_csv, tmp_path):
 
 def test_curve_range_is_the_range_of_the_signal_feeding_the_block(tmp_path):
     """The nonlinear block MR2 of the two-mass chart is fed by w2, MR1 by w1: their ranges over a free run."""
-    from flowchart2sdnn.identify.plots import curve_input_range
     from flowchart2sdnn.network.alignment import run_aligned
+    from flowchart2sdnn.report.identify_plots import curve_input_range
 
     data = _record(tmp_path / "tm.csv", "two_mass_plant.yaml", 1.0, seed=2)
     diagram = load_diagram(DIAGRAMS / "two_mass.yaml")

@@ -1,5 +1,7 @@
 """No module imports a layer above it: the package's layer rule, checked on every import statement (module level
-and inside functions alike) by reading the source, so a lazy import cannot hide an upward dependency."""
+and inside functions alike) by reading the source, so a lazy import cannot hide an upward dependency. Inside a
+package no two modules import each other, however far round (a lazy import cannot hide a cycle either), and
+only report/ draws: computation never imports report/ or matplotlib."""
 
 from __future__ import annotations
 
@@ -13,6 +15,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "flowchart2sdnn"
 #: bottom -> top; a module may import its own package and anything of a lower rank, nothing else of ours.
 RANKS = {
     "_version": 0, "errors": 0, "tables": 0, "strictjson": 0,
+    "views": 0,  # the registry report/ fills for results that draw on request (Identification.compare(plot=))
     "atomic": 1, "expr": 1, "executors": 1,
     "diagram": 2, "fit": 2, "data": 2,
     "analysis": 3, "network": 3,
@@ -21,6 +24,7 @@ RANKS = {
     "identify": 5,
     "diagnose": 6,
     "batch": 7,
+    "report": 7.5,  # text, pages and figures of every command, from the typed results of everything below
     "api": 8,
     "__init__": 8.5,  # the public names, over the api they come from
     "cli": 9,
@@ -103,3 +107,99 @@ def test_the_checker_sees_upward_imports_hidden_in_functions(tmp_path):
     absolute.write_text("def g():\n    import flowchart2sdnn.network.runtime\n")
     assert _violations(lazy, root) == ["line 5: flowchart2sdnn.identify.run (rank 5 >= fit's 2)"]
     assert _violations(absolute, root) == ["line 2: flowchart2sdnn.network.runtime (rank 3 >= fit's 2)"]
+
+
+# ------------------------------------------------------------------------------------ cycles inside a package
+def _runtime_imports(path: Path, root: Path = PACKAGE) -> list[tuple[int, str]]:
+    """(line, module) of every import of ours that runs: an import under `if TYPE_CHECKING:` only names types.
+    `from . import x` names the module x when x is one (not the package)."""
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    typing_only = {id(n) for node in ast.walk(tree) if isinstance(node, ast.If)
+                   and "TYPE_CHECKING" in ast.unparse(node.test) for n in ast.walk(node)}
+    name = _module_name(path, root)
+    package = name.split(".") if path.name == "__init__.py" else name.split(".")[:-1]
+    out = []
+    for node in ast.walk(tree):
+        if id(node) in typing_only:
+            continue
+        if isinstance(node, ast.Import):
+            out += [(node.lineno, a.name) for a in node.names if a.name.split(".")[0] == "flowchart2sdnn"]
+        elif isinstance(node, ast.ImportFrom):
+            base = package[: len(package) - (node.level - 1)] if node.level else []
+            target = ".".join(base + ([node.module] if node.module else []))
+            if target.split(".")[0] == "flowchart2sdnn":
+                out += [(node.lineno, f"{target}.{a.name}") for a in node.names]
+    return out
+
+
+def _package_graph(files, root: Path = PACKAGE) -> dict[str, dict[str, int]]:
+    """module -> {module of the same package it imports: line}, over the subpackages' modules."""
+    modules = {_module_name(f, root) for f in files}
+    graph: dict[str, dict[str, int]] = {}
+    for f in files:
+        me = _module_name(f, root)
+        if len(me.split(".")) < 2:
+            continue
+        for line, target in _runtime_imports(f, root):
+            parts = target.split(".")
+            while parts and ".".join(parts) not in modules:  # `from .x import name` -> module x
+                parts = parts[:-1]
+            them = ".".join(parts)
+            if them and them != me and them.split(".")[:2] == me.split(".")[:2]:
+                graph.setdefault(me, {})[them] = line
+    return graph
+
+
+def _cycles(files, root: Path = PACKAGE) -> list[str]:
+    import networkx as nx
+
+    graph = _package_graph(files, root)
+    g = nx.DiGraph([(a, b) for a, targets in graph.items() for b in targets])
+    return [" -> ".join(f"{m} (line {graph[m][c[(i + 1) % len(c)]]})" for i, m in enumerate(c)) + f" -> {c[0]}"
+            for c in sorted(sorted(c) for c in nx.simple_cycles(g))]
+
+
+def test_no_import_cycle_inside_a_package():
+    cycles = _cycles(FILES)
+    assert not cycles, "modules that import each other (break the cycle, do not hide it in a function):\n" + \
+        "\n".join(cycles)
+
+
+def test_the_cycle_checker_sees_a_lazy_cycle_and_not_a_typing_one(tmp_path):
+    """The test above could pass by seeing nothing: a cycle closed by a lazy `from . import` must show, a
+    cycle closed only under TYPE_CHECKING must not."""
+    root = tmp_path / "flowchart2sdnn"
+    (root / "fit").mkdir(parents=True)
+    (root / "__init__.py").write_text("")
+    (root / "fit" / "__init__.py").write_text("")
+    (root / "fit" / "a.py").write_text("from .b import g\n")
+    (root / "fit" / "b.py").write_text("def g():\n    from . import a\n")
+    (root / "fit" / "c.py").write_text("from .d import h\n")
+    (root / "fit" / "d.py").write_text("from typing import TYPE_CHECKING\nif TYPE_CHECKING:\n    from .c import X\n")
+    files = sorted(root.rglob("*.py"))
+    assert _cycles(files, root) == ["flowchart2sdnn.fit.a (line 1) -> flowchart2sdnn.fit.b (line 2) -> "
+                                    "flowchart2sdnn.fit.a"]
+
+
+# ----------------------------------------------------------------------------------------- only report/ draws
+#: the packages that compute: none of them may import report/ or draw
+COMPUTATION = {unit for unit, rank in RANKS.items() if rank < RANKS["report"]}
+
+
+@pytest.mark.parametrize("path", FILES, ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_only_report_draws(path):
+    unit = "__init__" if path == PACKAGE / "__init__.py" else _unit(_module_name(path))
+    if unit not in COMPUTATION:
+        return
+    tree = ast.parse(path.read_text(encoding="utf-8"))
+    drawing = [node.lineno for node in ast.walk(tree)
+               if (isinstance(node, ast.Import) and any(a.name.split(".")[0] == "matplotlib" for a in node.names))
+               or (isinstance(node, ast.ImportFrom) and (node.module or "").split(".")[0] == "matplotlib")]
+    viewing = [line for line, target in _imports(path) if _unit(target) == "report"]
+    assert not drawing, f"{path.relative_to(PACKAGE)} imports matplotlib at line(s) {drawing}: draw in report/"
+    assert not viewing, f"{path.relative_to(PACKAGE)} imports report/ at line(s) {viewing}"
+
+
+def test_computation_is_everything_below_the_views():
+    assert {"fit", "network", "identify", "diagnose", "batch", "simulate", "analysis"} <= COMPUTATION
+    assert not {"report", "api", "cli", "__init__"} & COMPUTATION

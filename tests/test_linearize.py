@@ -17,10 +17,10 @@ from click.testing import CliRunner
 from scipy import signal
 
 from flowchart2sdnn.analysis.linearize import linearize, parse_operating_point
+from flowchart2sdnn.analysis.response import empirical_response
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.data.csvdata import write_csv
 from flowchart2sdnn.diagram.validate import load_diagram
-from flowchart2sdnn.identify.bode import empirical_response
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -95,7 +95,8 @@ def test_the_readme_tour_runs_as_written(tmp_path, monkeypatch):
         assert sorted(p.name for p in tmp_path.iterdir()) == sorted(before + ["tour"]), f"run {run}: outside tour/"
     # the HTML reports: self-contained, every figure there, small enough to attach
     figures, text = read_page(tour / "stage2.html")
-    assert figures == ["compare", "resid w2 training", "resid w2 validation: bench.csv after the split", "Bode plot"]
+    assert figures == ["curve MR1", "curve MR2", "compare", "residual over time", "resid w2 training: bench.csv",
+                       "resid w2 validation: bench.csv after the split", "Bode plot"]
     assert "two_mass: identification" in text and "N*m/rad" in text and "95 % interval" in text
     figures, text = read_page(tour / "diagnose.html")
     accepted = re.search(r"accepted: ([^.]*?) stopped", text).group(1)
@@ -104,6 +105,13 @@ def test_the_readme_tour_runs_as_written(tmp_path, monkeypatch):
     assert "Candidates, ranked" in text and "Before and after" in text
     for page in ("stage2.html", "diagnose.html"):
         assert (tour / page).stat().st_size < 2_000_000
+    # in a notebook the tour's results show themselves briefly: one line, and a summary and HTML under 5 kB
+    import flowchart2sdnn as sd
+
+    for value in (sd.read_result(tour / "stage1.json"), sd.read_result(tour / "stage2.json"),
+                  sd.read_report(tour / "report.json", tour / "augmented.yaml")):
+        assert "\n" not in repr(value) and len(repr(value)) < 300
+        assert len(value.summary().encode()) < 5000 and len(value._repr_html_().encode()) < 5000
 
 
 def test_the_tour_folder_is_ignored_by_git():

@@ -58,7 +58,7 @@ def compare(model, data, horizon, output, chart, alignment, mapping, units, fmt,
 
     model, data = chart_first("sdnn compare MODEL DATA...", model, data, MODEL_SUFFIXES)
     if output:
-        from ..identify.plots import require_matplotlib
+        from ..report.canvas import require_matplotlib
 
         require_matplotlib()
         check_output_path(output, [model, *data] + ([chart] if chart else []), force=force)
@@ -70,7 +70,7 @@ def compare(model, data, horizon, output, chart, alignment, mapping, units, fmt,
     compiled = CompiledNetwork(compile_diagram(diagram).network)
     comparison = compare_records(compiled, compiled.theta0(), records, alignment, horizon, diagram)
     if output:
-        from ..identify.figures import write_compare
+        from ..report.figures import write_compare
 
         write_compare(comparison, output, diagram.name)
     rows = comparison.table()

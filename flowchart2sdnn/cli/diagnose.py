@@ -1,26 +1,28 @@
-"""`sdnn diagnose`: the click layer over diagnose.loop (formatting lives in diagnose.summary).
+"""`sdnn diagnose`: the click layer over diagnose.loop (formatting lives in report.diagnose_text).
 
 Layer: cli (the rule is in the package docstring).
 """
 
 from __future__ import annotations
 
-import json
 import sys
+from dataclasses import replace
 
 import click
 
-from ..strictjson import strict_json
 from .help import SectionedCommand
 from .options import (
     alignment_option,
     column_reading,
+    command_line,
     data_options,
     executor_options,
     force_option,
     handle_errors,
     html_option,
     intersample_option,
+    lags_given,
+    lags_option,
     max_iter_option,
     read_records,
     require_figures,
@@ -123,6 +125,7 @@ EFFECTS = {"Effect search": ("rounds", "effect_names", "effects_file", "top", "s
 @rows_option("each training record")
 @seed_option("Seed for initial curves.")
 @html_option()
+@lags_option()
 @force_option()
 @click.option("--quiet", is_flag=True, help="No progress, report text or 'wrote' lines (errors still go to stderr).")
 @executor_options("the candidate refits")
@@ -134,12 +137,13 @@ def diagnose(paths, diagram, validation, split, output, report_path, rounds, eff
     add them to the chart, refit, and report the error before and after."""
     from ..atomic import atomic_write_text, check_output_path
     from ..data.timebase import record_notes
+    from ..diagnose.document import dumps
     from ..diagnose.effects import effect_library, select_effects
     from ..diagnose.loop import DiagnoseSettings
     from ..diagnose.loop import diagnose as run_diagnose
-    from ..diagnose.summary import format_report
     from ..diagram.dump import dump_diagram
     from ..diagram.validate import load_diagram
+    from ..report.diagnose_text import format_report
 
     chart, data = chart_and_data("diagnose", paths, diagram)
     if validation and split:
@@ -197,32 +201,29 @@ def diagnose(paths, diagram, validation, split, output, report_path, rounds, eff
         progress.close()
     if executor is not None:
         # after Ctrl-C the refits still running are dropped, not waited for
-        executor.close(cancel=bool(outcome.report.get("interrupted")))
+        executor.close(cancel=outcome.interrupted)
+    outcome = replace(outcome, data_notes=tuple(notes),
+                      command={"data": list(data), "diagram": chart, "validate": list(validation),
+                               "effects_file": effects_file, "output": output, "map": dict(maps)})
     report = outcome.report
-    if notes:
-        report["data_notes"] = notes
-    report["command"] = {"data": list(data), "diagram": chart, "validate": list(validation),
-                         "effects_file": effects_file, "output": output, "map": dict(maps)}
-    report_text = json.dumps(strict_json(report), indent=1, allow_nan=False) + "\n"
+    report_text = dumps(report)
     chart_text = dump_diagram(outcome.diagram, {"from": "sdnn diagnose", "chart": chart,
-                                                "accepted": [f"{a['effect']} at {a['at']}"
-                                                             + (f" ({a['label']})" if a["label"] else "")
-                                                             for a in report["accepted"]]})
+                                                "accepted": [a.title for a in outcome.accepted]})
     if output:
         atomic_write_text(output, chart_text)
     if report_path:
         atomic_write_text(report_path, report_text)
     written = []
     if plots:
-        from ..diagnose.plots import write_plots
+        from ..report.diagnose_plots import write_plots
 
-        written = write_plots(outcome, train[0], plots)
+        written = write_plots(outcome, train[0], plots, lags_given())
     if html_path:
-        from ..diagnose.html import diagnosis_html
-        from ..identify.html import write_html
+        from ..report.diagnose_page import diagnosis_html
+        from ..report.html import write_html
 
-        written.append(write_html(html_path, diagnosis_html(outcome, train[0], val,
-                                                            f"sdnn diagnose {' '.join(data)} --diagram {chart}")))
+        written.append(write_html(html_path, diagnosis_html(outcome, train[0], val, command_line(), notes,
+                                                            lags=lags_given())))
     if not quiet:
         click.echo(format_report(report), nl=False)
         for path in [p for p in (output, report_path) if p] + [str(w) for w in written]:

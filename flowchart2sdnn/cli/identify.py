@@ -1,4 +1,4 @@
-"""`sdnn identify`: the click layer over identify.run (formatting lives in identify.summary).
+"""`sdnn identify`: the click layer over identify.run (formatting lives in report.identify_text).
 
 Layer: cli (the rule is in the package docstring).
 """
@@ -14,12 +14,15 @@ from .help import SectionedCommand
 from .options import (
     alignment_option,
     column_reading,
+    command_line,
     data_options,
     executor_options,
     force_option,
     handle_errors,
     html_option,
     intersample_option,
+    lags_given,
+    lags_option,
     max_iter_option,
     read_records,
     require_figures,
@@ -96,6 +99,7 @@ __all__ = ["identify"]
               help="Directory for the figures (PNG; created if needed, figures of the same name replaced). "
                    "Needs matplotlib: pip install flowchart2sdnn[plots].")
 @html_option()
+@lags_option()
 @force_option()
 @click.option("--quiet", is_flag=True,
               help="No progress, table or 'wrote' lines (errors and the not-converged warning still go to stderr).")
@@ -116,7 +120,7 @@ def identify(paths, diagram, output, fix_from, validation, init_window, shooting
     from ..identify.run import IdentifySettings
     from ..identify.run import identify as run_identify
     from ..identify.settings import IDENTIFY_GEODESIC
-    from ..identify.summary import format_result
+    from ..report.identify_text import format_result
 
     chart, data = chart_and_data("identify", paths, diagram)
     if validation and split:
@@ -176,6 +180,9 @@ def identify(paths, diagram, output, fix_from, validation, init_window, shooting
         result_text = dumps({**outcome.to_document(), **extra})
         atomic_write_text(chart_out, chart_text)
         atomic_write_text(output, result_text)
+    # what is printed beside the result's own warnings, on stderr at the end: the page shows it too
+    printed = [f"not converged: {_stop_reason(outcome)}; raise --max-iter, or start closer"] \
+        if outcome.converged is False and outcome.status != "interrupted" else []
     if plots or html_path:
         records = [(f"training: {Path(d.path).name}", d, 0) for d in train]
         checks = [(f"validation: {Path(val.path).name}", val, 0)] if val is not None else []
@@ -185,14 +192,15 @@ def identify(paths, diagram, output, fix_from, validation, init_window, shooting
             checks = [(f"validation: {Path(train[0].path).name} after the split", train[0], n)]
     figures = []
     if plots:
-        from ..identify.plots import write_plots
+        from ..report.identify_plots import write_plots
 
-        figures = write_plots(outcome, plots, records, checks)
+        figures = write_plots(outcome, plots, records, checks, lags_given())
     if html_path:
-        from ..identify.html import identification_html, write_html
+        from ..report.html import write_html
+        from ..report.identify_page import identification_html
 
-        write_html(html_path, identification_html(outcome, records, checks, fixed,
-                                                  f"sdnn identify {' '.join(data)} --diagram {chart}"))
+        write_html(html_path, identification_html(outcome, records, checks, fixed, command_line(), printed,
+                                                  lags_given()))
     if not quiet:
         click.echo(format_result(outcome, fixed), nl=False)
         if output:
@@ -201,14 +209,20 @@ def identify(paths, diagram, output, fix_from, validation, init_window, shooting
             click.echo(f"wrote {html_path}")
         if plots:
             click.echo(f"wrote {len(figures)} figure(s) to {plots}")
-    if outcome.converged is False and outcome.status != "interrupted":
-        from ..fit.stoprule import stop_rule
-
-        rule = stop_rule(outcome.status, outcome.message)  # the one rule that ended it, not the whole message
-        why = f"{rule.sentence} (after {rule.iterations} iteration{'s' * (rule.iterations != 1)})" if rule \
-            else outcome.message
-        click.echo(f"warning: not converged: {why}; raise --max-iter, or start closer", err=True)
+    for line in printed:
+        click.echo(f"warning: {line}", err=True)
     if outcome.status == "interrupted":
         click.echo(f"interrupted: {'the best result so far is in ' + output if output else 'no -o, nothing written'}",
                    err=True)
         sys.exit(1)
+
+
+def _stop_reason(outcome) -> str:
+    """The one rule that ended an unconverged fit, with its iterations (the whole message where none is read)."""
+    from ..fit.stoprule import stop_rule
+
+    rule = stop_rule(outcome.status, outcome.message)
+    if rule is None:
+        return outcome.message
+    its = rule.iterations
+    return rule.sentence + (f" (after {its} iteration{'s' * (its != 1)})" if its is not None else "")

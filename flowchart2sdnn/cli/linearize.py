@@ -58,7 +58,7 @@ def linearize(model, data, at, kink, control_path, bode, chart, mapping, units, 
     if data and not bode:
         raise click.UsageError("DATA is only read for --bode (the measured frequency response)")
     if bode:
-        from ..identify.plots import require_matplotlib
+        from ..report.canvas import require_matplotlib
 
         require_matplotlib()
     for path in (control_path, bode):
@@ -78,9 +78,10 @@ def linearize(model, data, at, kink, control_path, bode, chart, mapping, units, 
 
         write_state_space(lin, control_path)
     if bode:
+        from ..analysis.response import empirical_response
         from ..data.csvdata import read_csv
-        from ..identify.bode import empirical_response, write_bode
         from ..identify.problem import required_columns
+        from ..report.bode import write_bode
 
         estimates = []
         maps, scales = column_reading(diagram, mapping, units)

@@ -348,7 +348,7 @@ def html_option():
 def require_figures(plots, html_path) -> None:
     """Check matplotlib before any work when figures or a page are asked for (PLOT001 naming the option)."""
     if plots or html_path:
-        from ..identify.plots import require_matplotlib
+        from ..report.canvas import require_matplotlib
 
         require_matplotlib("--plots" if plots else "--html")
 
@@ -368,3 +368,27 @@ def executor_options(work: str):
                             help=f"Run {work} in N local worker processes.")(func)
 
     return decorate
+
+
+def command_line() -> str:
+    """The command line of this run, quoted for a shell: what a page prints so that the run can be repeated."""
+    import shlex
+
+    return shlex.join(["sdnn", *sys.argv[1:]])
+
+
+def lags_option():
+    """``--lags N``: the residual analysis's lags on the page and in --plots. The value goes to the context's
+    meta (read with :func:`lags_given`), not to the command's parameters: a view's setting, kept out of the
+    fitting's argument list."""
+    def keep(ctx, param, value):
+        ctx.meta["lags"] = value
+        return value
+
+    return click.option("--lags", type=click.IntRange(min=1), default=None, metavar="N", expose_value=False,
+                        callback=keep, help="Lags of the residual correlation figures (--html, --plots); default: "
+                                            "spanning the slowest mode of the linearised chart, at least 25.")
+
+
+def lags_given() -> int | None:
+    return click.get_current_context().meta.get("lags")

@@ -35,7 +35,8 @@ def report(results, directory, group, threshold, t_min, ci_factor) -> None:
     Drive and day come from file names such as drive07_day012.csv, pump-3_2024-05-01.csv or
     drive07/2024-05-01.csv (see --group for others).
     """
-    from ..batch.drift import drift_table, effects_table, load_fleet, plots_available, write_report
+    from ..batch.drift import drift_table, effects_table, load_fleet
+    from ..report.drift import plots_available, write_report
 
     fleet = load_fleet(results, group)
     drift = drift_table(fleet, threshold=threshold, t_min=t_min, ci_factor=ci_factor)

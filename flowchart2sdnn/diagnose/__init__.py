@@ -1,8 +1,9 @@
 """`sdnn diagnose`: trace the residual to a missing effect, add it to the chart, refit, report before and after.
 
 Pipeline: residual tests (:mod:`.residual`) -> the effects library (:mod:`.effects`, :mod:`.usereffects`) ->
-the score test of every candidate (:mod:`.score`) -> brief refits and acceptance (:mod:`.loop`) -> text
-report (:mod:`.summary`); the click command lives in :mod:`flowchart2sdnn.cli.diagnose`.
+the score test of every candidate (:mod:`.score`) -> brief refits and acceptance (:mod:`.loop`) -> the typed
+:class:`~.result.Diagnosis` and REPORT.json (:mod:`.document`); the text, page and figures live in
+:mod:`flowchart2sdnn.report`, the click command in :mod:`flowchart2sdnn.cli.diagnose`.
 """
 
 from __future__ import annotations
@@ -16,7 +17,9 @@ _WHERE = {
                      "Friction", "InputOffset", "LinearTerm", "Saturation", "Scales", "SensorLimit",
                      "SensorOffset"), "effects"),
     "Place": "graph",
-    **dict.fromkeys(("DiagnoseSettings", "Diagnosis", "Fitted", "diagnose"), "loop"),
+    **dict.fromkeys(("DiagnoseSettings", "Fitted", "diagnose"), "loop"),
+    "Diagnosis": "result",
+    "read_report": "document",
     **dict.fromkeys(("Candidate", "Score", "Screen", "gauss_newton_decrease", "screen"), "score"),
     **dict.fromkeys(("YamlEffect", "load_effects_file"), "usereffects"),
 }
@@ -55,5 +58,6 @@ __all__ = [
     "diagnose",
     "gauss_newton_decrease",
     "load_effects_file",
+    "read_report",
     "screen",
 ]

@@ -34,13 +34,14 @@ from __future__ import annotations
 import math
 import time
 from collections.abc import Callable, Sequence
-from dataclasses import dataclass, field, replace
+from dataclasses import replace
 
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify.run import with_floor_bias
 from ..strictjson import finite_or_none
+from .document import REPORT_FORMAT, REPORT_VERSION, fit_summary, read_accepted, read_candidate, read_round
 from .effects import BUILTIN_EFFECTS, Effect, Scales
 from .entries import round_entry as _round_entry
 from .entries import summary as _summary
@@ -61,26 +62,12 @@ from .fitting import (
     unpredictable,
     with_floor,
 )
+from .result import Diagnosis, FirstFit, ResidualCheck
 from .score import Candidate, Score, Screen, screen
 from .tracked import prefix_problem, score_rows
 
 __all__ = ["DiagnoseSettings", "Fitted", "Diagnosis", "diagnose", "refit_unit", "refusal", "fit_chart", "horizons",
            "candidates", "done_key", "gain_spread", "whole_run_stop", "REPORT_FORMAT", "REPORT_VERSION"]
-
-REPORT_FORMAT = "sdnn-diagnose"
-REPORT_VERSION = 1
-
-
-@dataclass(frozen=True, eq=False)
-class Diagnosis:
-    """What :func:`diagnose` found: REPORT.json as a dict, the final (augmented, identified) chart and fits."""
-
-    report: dict
-    diagram: Diagram
-    final: Fitted
-    nominal: Fitted
-    screens: tuple[Screen, ...] = field(default=())
-
 
 # ------------------------------------------------------------------------------------------------ helpers
 def candidates(effects: Sequence[Effect], current: Diagram, scales: Scales, done: set) -> list[Candidate]:
@@ -450,27 +437,19 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             stop_reason, interrupted = "interrupted", True
         timing["final_bias"] = time.perf_counter() - t_bias
     say("residual analysis", None)
-    report = {
-        "format": REPORT_FORMAT,
-        "version": REPORT_VERSION,
-        "stop": whole_run_stop(stop_reason, len(accepted)),
-        "last_round": stop_reason,
-        "n_accepted": len(accepted),
-        "first_fit": {"converged": nominal.identification.converged, "status": nominal.identification.status,
-                      "message": nominal.identification.message, "still_moving": moving},
-        "interrupted": interrupted,
-        "candidates": candidates_out,
-        "rounds": rounds,
-        "accepted": accepted,
-        "before": _summary(nominal),
-        "after": _summary(current),
-        "whiteness": {"before": residual_analysis(nominal, train, settings),
-                      "after": residual_analysis(current, train, settings)},
-        "final": current.identification.to_document(),
-        "settings": {**settings.__dict__, "split": split, "effects": [e.name for e in effects]},
-        "timing": {**timing, "total": time.perf_counter() - t_start},
-    }
-    return Diagnosis(report, current.diagram, current, nominal, tuple(screens))
+    whiteness = (ResidualCheck(residual_analysis(nominal, train, settings)),
+                 ResidualCheck(residual_analysis(current, train, settings)))
+    ident = nominal.identification
+    # the rounds' pieces are built as REPORT.json mappings (entries.py) and read as the typed parts here
+    return Diagnosis(
+        stop=whole_run_stop(stop_reason, len(accepted)), last_round=stop_reason,
+        first_fit=FirstFit(ident.converged, ident.status, ident.message, tuple(moving)), interrupted=interrupted,
+        candidates=tuple(map(read_candidate, candidates_out)), rounds=tuple(map(read_round, rounds)),
+        accepted=tuple(map(read_accepted, accepted)),
+        before=fit_summary(_summary(nominal)), after=fit_summary(_summary(current)), whiteness=whiteness,
+        identification=current.identification, settings=settings, split=split,
+        effects=tuple(e.name for e in effects), timing={**timing, "total": time.perf_counter() - t_start},
+        diagram=current.diagram, final=current, nominal=nominal, screens=tuple(screens))
 
 
 # the starts from the chart as given, which a growing horizon may also refit, and the start the grown fit reads

@@ -22,7 +22,7 @@ from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..network.alignment import network_inputs
 from ..network.runtime import CompiledNetwork
-from .problem import columns_of, data_init, network_input_names  # problem imports this module lazily
+from .arrays import columns_of, data_init, network_input_names
 
 __all__ = ["with_spans", "input_span"]
 

@@ -1,6 +1,6 @@
 """RESULT.json: the only writer and reader of the result file format, and values from it into a chart.
 
-:func:`to_document` turns an :class:`~flowchart2sdnn.identify.result.Identification` into the document (keys as
+:func:`to_document` (written in :mod:`.serialize`, re-exported here) turns an :class:`~flowchart2sdnn.identify.result.Identification` into the document (keys as
 they have always been: users' scripts read them), :func:`from_document` reads one back, :func:`dumps` writes it
 as strict JSON. :func:`load_result` checks a file, :func:`apply_result_file` and :func:`fix_from_result` put its
 values into a chart (``simulate --params``, the paper's stages with ``--fix-from``).
@@ -18,7 +18,6 @@ from pathlib import Path
 from ..diagram.dump import with_values
 from ..diagram.model import Diagram
 from ..errors import SdnnError
-from ..strictjson import strict_json
 from .result import (
     ChartSource,
     Curve,
@@ -33,100 +32,11 @@ from .result import (
     RecordInfo,
     Uncertainty,
 )
+from .serialize import NON_FINITE, RESULT_FORMAT, RESULT_VERSION, dumps, to_document
 from .settings import IdentifySettings
 
 __all__ = ["to_document", "from_document", "dumps", "read_result", "load_result", "apply_result_file",
            "fix_from_result", "read_model", "RESULT_FORMAT", "RESULT_VERSION"]
-
-RESULT_FORMAT = "sdnn-result"
-RESULT_VERSION = 1
-#: The document's own warning when it had to store NaN/inf as null (not part of the typed result).
-_NON_FINITE = "non-finite values stored as null: "
-
-
-# ------------------------------------------------------------------------------------------------ writing
-def _metrics(m: Metrics) -> dict:
-    out = {"rows": m.rows, "cost": m.cost, "rms": dict(m.rms), "fit_percent": dict(m.fit_percent)}
-    if m.records is not None:
-        out["records"] = [_metrics(r) for r in m.records]
-    if m.note is not None:
-        out["note"] = m.note
-    return out
-
-
-def _record(r: RecordInfo | None) -> dict | None:
-    return None if r is None else {"file": r.file, "sha256": r.sha256, "rows": r.rows,
-                                   "max_step_deviation": r.max_step_deviation}
-
-
-def _settings(s: IdentifySettings) -> dict:
-    from dataclasses import asdict
-
-    return {k: (list(v) if isinstance(v, tuple) else v) for k, v in asdict(s).items()}
-
-
-def to_document(ident: Identification) -> dict:
-    """The RESULT.json body of an identification (NaN/inf stored as null, with a warning saying where)."""
-    doc = {
-        "format": RESULT_FORMAT,
-        "version": RESULT_VERSION,
-        "status": ident.status,
-        "message": ident.message,
-        "interrupted": bool(ident.interrupted),
-        "converged": ident.converged,
-        "parameters": {n: {"value": e.value, "init": e.init, "stderr": e.stderr,
-                           "ci95": None if e.ci95 is None else list(e.ci95), "unit": e.unit, "fixed": e.fixed,
-                           "ci95_noise": None if e.ci95_noise is None else list(e.ci95_noise)}
-                       for n, e in ident.parameters.items()},
-        "nonlinear": {b: {"a": list(c.a), "v": list(c.v), **({"b": list(c.b)} if c.b is not None else {}),
-                          **({"c": c.c} if c.c is not None else {}), "fixed": c.fixed}
-                      for b, c in ident.curves.items()},
-        "fit": {"train": _metrics(ident.fit.train),
-                "validation": None if ident.fit.validation is None else _metrics(ident.fit.validation)},
-        "warnings": list(ident.warnings),
-        "settings": _settings(ident.settings),
-        "seed": ident.settings.seed,
-        "chart": {"name": ident.source.name, "file": ident.source.file, "sha256": ident.source.sha256},
-        "data": {"train": _record(ident.data.train), "train_records": [_record(r) for r in ident.data.train_records],
-                 "validation": _record(ident.data.validation)},
-        "versions": dict(ident.versions),
-    }
-    if (o := ident.optimizer) is not None:
-        doc["optimizer"] = {"iterations": o.iterations, "cost_history": list(o.cost_history), "nfev": o.nfev,
-                            "njev": o.njev, "rejected": {"cost": o.rejected_cost, "diverged": o.rejected_diverged,
-                                                         "chatter": o.rejected_chatter}}
-    if (m := ident.multistart) is not None:
-        ms = {"n": m.n, "best_index": m.best_index, "costs": list(m.costs), "near_best": list(m.near_best),
-              "local_minima": list(m.local_minima), "diverged": list(m.diverged),
-              "starts": [list(s) for s in m.starts], "message": m.message}
-        if m.names is not None:
-            ms["names"] = list(m.names)
-        if m.cost is not None:
-            ms["cost"] = m.cost
-        doc["multistart"] = ms
-    if (u := ident.uncertainty) is not None:
-        doc["uncertainty"] = {"names": list(u.names), "correlation": [list(r) for r in u.correlation],
-                              "condition_number": u.condition_number,
-                              "unidentifiable": [list(g) for g in u.unidentifiable], "sigma2": u.sigma2,
-                              "residual_lag1": u.residual_lag1, "interval_inflation": u.interval_inflation,
-                              "note": u.note}
-    if (t := ident.online) is not None:
-        doc["online"] = {"window": t.window, "average": t.average, "every": t.every, "steps": t.steps,
-                         "mean_cost": t.mean_cost, "final": dict(t.final), "trajectory_time": list(t.trajectory_time),
-                         "trajectories": {n: list(v) for n, v in t.trajectories.items()},
-                         "cost_time": list(t.cost_time), "cost": list(t.cost)}
-    bad: list[str] = []
-    doc = strict_json(doc, "", bad)
-    if bad:
-        doc["warnings"].append(f"{_NON_FINITE}{', '.join(bad[:5])}" + (f" (+{len(bad) - 5} more)" if len(bad) > 5 else ""))
-    doc.update(ident.extra)
-    return doc
-
-
-def dumps(doc: dict) -> str:
-    """A document as RESULT.json text (strict JSON; what `sdnn identify -o` writes)."""
-    return json.dumps(doc, indent=1, allow_nan=False) + "\n"
-
 
 # ------------------------------------------------------------------------------------------------ reading
 _KNOWN = {"format", "version", "status", "message", "interrupted", "converged", "parameters", "nonlinear", "fit", "warnings",
@@ -179,7 +89,7 @@ def from_document(doc: dict, chart: Diagram | None = None) -> Identification:
                          None if c.get("c") is None else _nan(c["c"]))
                 for b, c in doc["nonlinear"].items()},
         fit=Fit(_read_metrics(fit["train"]), None if fit["validation"] is None else _read_metrics(fit["validation"])),
-        warnings=tuple(w for w in doc["warnings"] if not w.startswith(_NON_FINITE)),
+        warnings=tuple(w for w in doc["warnings"] if not w.startswith(NON_FINITE)),
         settings=settings, chart=chart,
         source=ChartSource(doc["chart"]["name"], doc["chart"]["file"], doc["chart"]["sha256"]),
         data=DataInfo(_read_record(data["train"]), tuple(_read_record(r) for r in data["train_records"]),
@@ -205,9 +115,21 @@ def from_document(doc: dict, chart: Diagram | None = None) -> Identification:
     )
 
 
-def read_result(path: str | Path, chart: Diagram | None = None) -> Identification:
-    """Read a RESULT.json written by `sdnn identify` as an :class:`Identification`."""
-    return from_document(load_result(path), chart)
+def read_result(path: str | Path, chart: Diagram | str | Path | None = None) -> Identification:
+    """Read a RESULT.json written by `sdnn identify` as an :class:`Identification`.
+
+    Its ``chart`` (what ``simulate``, ``compare`` and ``linearize`` run) is `chart` when given (a Diagram or a
+    chart file), else the identified chart written beside the result (``RESULT.chart.yaml``, or the file its
+    ``identified_chart`` key names), else None.
+    """
+    from ..diagram.validate import load_diagram
+
+    data = load_result(path)
+    if chart is None:
+        chart = _chart_beside(path, data)
+    elif not isinstance(chart, Diagram):
+        chart = load_diagram(chart)
+    return from_document(data, chart)
 
 
 def _chart_beside(path: str | Path, data: dict) -> Diagram | None:
@@ -294,14 +216,22 @@ def apply_result_file(diagram: Diagram, path: str | Path) -> Diagram:
     return chart
 
 
-def fix_from_result(diagram: Diagram, path: str | Path) -> tuple[Diagram, list[str]]:
-    """Take matching parameters and nonlinear blocks from an earlier result and fix them (the paper's stages)."""
-    params, nonlinear = _values(load_result(path))
+def fix_from_result(diagram: Diagram, source: str | Path | Identification) -> tuple[Diagram, list[str]]:
+    """Take matching parameters and nonlinear blocks from an earlier result (a RESULT.json file or an
+    :class:`Identification`) and fix them (the paper's stages); also the names taken."""
+    if isinstance(source, Identification):
+        where = f"the result of chart '{source.source.name}'"
+        params = source.values
+        nonlinear = {b: {"a": list(c.a), "v": list(c.v), **({"b": list(c.b)} if c.b is not None else {}),
+                         **({"c": c.c} if c.c is not None else {})} for b, c in source.curves.items()}
+    else:
+        where = str(source)
+        params, nonlinear = _values(load_result(source))
     names = set(diagram.parameter_names)
     params = {k: v for k, v in params.items() if k in names}
-    nonlinear = _matching_curves(diagram, nonlinear, str(path))
+    nonlinear = _matching_curves(diagram, nonlinear, where)
     if not params and not nonlinear:
-        raise SdnnError.at("RES004", "no parameter or nonlinear block name matches the chart", str(path),
+        raise SdnnError.at("RES004", "no parameter or nonlinear block name matches the chart", where,
                            hint=f"the chart has parameters {', '.join(sorted(names)) or 'none'}")
     return with_values(diagram, params, nonlinear, fix=True), sorted(params) + sorted(nonlinear)
 

@@ -17,6 +17,8 @@ from ..network.model import Network
 from ..network.runtime import CompiledNetwork
 from ..network.stability import rest_radii
 from ..strictjson import finite_or_none
+from .arrays import columns_of, data_init, network_input_names
+from .curvespan import with_spans
 
 __all__ = ["Problem", "columns_of", "Segment", "build_problem", "metrics", "combined_metrics", "data_init", "required_columns", "CHATTER_LIMIT"]
 
@@ -28,11 +30,6 @@ GROWTH_LIMIT = 1.01
 
 def required_columns(diagram: Diagram) -> list[str]:
     return list(diagram.input_names) + [n for n in diagram.output_names if n not in diagram.input_names]
-
-
-def data_init(network: Network, data: Dataset) -> dict[str, float]:
-    """Initial states taken from the first measured sample (integrators with `init: data`)."""
-    return {s.data: float(data.columns[s.data][0]) for s in network.initial_states if s.data}
 
 
 @contextmanager
@@ -211,11 +208,6 @@ class Problem:
         return None
 
 
-def columns_of(data: Dataset, names) -> np.ndarray:
-    """The record's columns `names` as one (Q, len(names)) float array: the one way a record becomes arrays."""
-    return np.column_stack([np.asarray(data.columns[n], dtype=float) for n in names])
-
-
 def build_problem(diagram: Diagram, data: Dataset, alignment: str = "zoh", seed: int = 0,
                   network: Network | None = None, more: Sequence[Dataset] = ()) -> Problem:
     """Compile `diagram` (unless `network` is given) and align `data` (and the records in `more`) to it.
@@ -223,8 +215,6 @@ def build_problem(diagram: Diagram, data: Dataset, alignment: str = "zoh", seed:
     Learned curves of the tanh basis without slopes get them over their input's range in the records
     (identify.curvespan); the problem's `diagram` is the chart with them."""
     if network is None:
-        from .curvespan import with_spans  # curvespan reads records through this module's helpers
-
         diagram, _ = with_spans(diagram, (data, *more), alignment)
         network = compile_diagram(diagram, seed=seed).network
     compiled = CompiledNetwork(network)
@@ -265,10 +255,6 @@ def _check_magnitude(data: Dataset, names) -> None:
             raise SdnnError.at("DATA002", f"column '{column}': values up to {values[k]:.3g} are too large to "
                                "square (expected magnitudes below about 1e150)", data.path,
                                hint="rescale the data (another unit)")
-
-
-def network_input_names(network: Network) -> list[str]:
-    return [i.name for i in network.inputs]
 
 
 def metrics(compiled: CompiledNetwork, x: np.ndarray, data: Dataset, alignment: str, init=None,

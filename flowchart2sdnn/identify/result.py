@@ -19,9 +19,11 @@ from typing import Any
 import numpy as np
 
 from ..diagram.model import Diagram
+from ..views import view
+from .extra import Extra
 from .settings import IdentifySettings
 
-__all__ = ["Estimate", "Curve", "Metrics", "Fit", "Uncertainty", "OptimizerTrace", "MultistartSummary",
+__all__ = ["Estimate", "Curve", "Metrics", "Fit", "Uncertainty", "OptimizerTrace", "MultistartSummary", "Extra",
            "OnlineTrace", "RecordInfo", "DataInfo", "ChartSource", "Identification"]
 
 
@@ -200,8 +202,13 @@ class Identification:
     data : DataInfo
     versions : {package: version}
     optimizer, multistart, uncertainty, online : optional parts (None where they do not apply)
-    extra : {key: value}         further RESULT.json keys written beside the result (the command line, the
-                                 identified chart's file), kept so a document reads back unchanged
+    extra : Extra                further RESULT.json keys, typed (``.discretization``, ``.shooting``,
+                                 ``.parameters_per_record``, ``.command``, ``.identified_chart``, ...; unknown keys
+                                 of a document read back in ``.other``) and readable as a mapping of those keys;
+                                 a plain dict given here becomes one
+
+    ``summary()``, ``parameters_table()`` and ``fit_table()`` are for reading it in a notebook (which shows
+    ``_repr_html_``), ``to_json()`` is RESULT.json.
 
     The fitting problem and the optimizer's raw results (``problem``, ``x``, ``lm``, ``online_run``) are there
     for the code that continues from a fit (diagnose, plots); they are not part of the document.
@@ -224,11 +231,45 @@ class Identification:
     multistart: MultistartSummary | None = None
     uncertainty: Uncertainty | None = None
     online: OnlineTrace | None = None
-    extra: Mapping[str, Any] = field(default_factory=dict)
+    extra: Extra = field(default_factory=Extra)
     problem: Any = field(default=None, repr=False)
     x: np.ndarray | None = field(default=None, repr=False)
     lm: Any = field(default=None, repr=False)
     online_run: Any = field(default=None, repr=False)
+
+    def __post_init__(self) -> None:
+        if not isinstance(self.extra, Extra):
+            object.__setattr__(self, "extra", Extra.of(self.extra))
+
+    def __repr__(self) -> str:
+        return view("identification_line")(self)
+
+    def summary(self) -> str:
+        """A short text: status, parameters with units, ± standard error and %, fit per output, warnings.
+
+        ``print(result.summary())``; the whole report is ``sdnn identify``'s text (report.identify_text.format_result)
+        and the RESULT.json document (:meth:`to_json`)."""
+        return view("identification_text")(self)
+
+    def _repr_html_(self) -> str:
+        """What a notebook shows: the page's status, parameter, fit and warning sections (no figures)."""
+        return view("identification_html")(self)
+
+    def parameters_table(self):
+        """The parameters as a table: a pandas DataFrame when pandas is installed, else a list of dicts; columns
+        parameter, value, unit, stderr, stderr_percent, ci95_low, ci95_high, init, fixed."""
+        from ..tables import frame
+        from .rows import PARAMETER_COLUMNS, parameter_rows
+
+        return frame(parameter_rows(self), PARAMETER_COLUMNS)
+
+    def fit_table(self):
+        """The fit per record (train, validation) and output as a table (DataFrame when pandas is installed, else
+        a list of dicts); columns record, output, rms, fit_percent, cost, rows."""
+        from ..tables import frame
+        from .rows import FIT_COLUMNS, fit_rows
+
+        return frame(fit_rows(self), FIT_COLUMNS)
 
     @property
     def diagram(self) -> Diagram | None:
@@ -250,9 +291,11 @@ class Identification:
         alignment : str, optional
             "zoh" or "direct"; default the one of the fit.
         """
-        from .compare import predict
+        from .arrays import network_input_names
+        from .compare import predict, require_columns
 
         compiled, x = self._network()
+        require_columns(data, network_input_names(compiled.net))
         y = predict(compiled, x, data, alignment or self.settings.alignment)
         return {name: y[:, i] for i, name in enumerate(compiled.output_names)}
 
@@ -279,7 +322,8 @@ class Identification:
             None: free run; k: k-step-ahead prediction (restarts from the measured outputs every k samples,
             see :mod:`flowchart2sdnn.identify.compare`).
         plot : str or Path, optional
-            Also draw the comparison (one PNG, every record; needs matplotlib) into this file.
+            Also draw the comparison (one PNG, every record; needs matplotlib) into this file: drawn by
+            :func:`flowchart2sdnn.report.figures.write_compare`, which does the same with the returned data.
         alignment : str, optional
             "zoh" or "direct"; default the one of the fit.
 
@@ -299,10 +343,8 @@ class Identification:
             records = [(Path(d.path).name, d, 0) for d in items]
         compiled, x = self._network()
         out = compare_records(compiled, x, records, alignment or self.settings.alignment, horizon, self.chart)
-        if plot is not None:
-            from .figures import write_compare
-
-            write_compare(out, plot, self.chart.name if self.chart is not None else self.source.name)
+        if plot is not None:  # the figure is a view: report/ registered it (see flowchart2sdnn.views)
+            view("compare_png")(out, plot, self.chart.name if self.chart is not None else self.source.name)
         return out
 
     def linearize(self, at: Mapping[str, float] | None = None, kink: str = "zero"):
@@ -320,7 +362,7 @@ class Identification:
 
     def to_document(self) -> dict:
         """The RESULT.json body, a new dict each call (see :mod:`flowchart2sdnn.identify.document`)."""
-        from .document import to_document
+        from .serialize import to_document
 
         return to_document(self)
 
@@ -332,6 +374,6 @@ class Identification:
 
     def to_json(self) -> str:
         """RESULT.json as text (strict JSON: non-finite numbers are stored as null, with a warning)."""
-        from .document import dumps
+        from .serialize import dumps
 
         return dumps(self.to_document())

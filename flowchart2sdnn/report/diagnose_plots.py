@@ -4,24 +4,26 @@ For every accepted effect, ``residual_<effect>_<at>.png`` shows, per output, the
 simulated, training record) of the chart as given (left) and of the final chart (right) against the signal
 the effect attaches to (a speed for friction, an input for a dead time, ...): a friction curve shows up as
 a step at zero speed on the left and is gone on the right. ``whiteness.png`` shows the residual
-autocorrelation before and after with the 99 % band; ``resid_<output>.png`` the residual analysis of the final
-chart (autocorrelation and cross-correlation with each input, 99 % band; see identify.figures). Written like
-the identify figures: an Agg canvas per figure, rendered to bytes and written atomically.
+autocorrelation before and after with the 99 % band, over lags spanning the final chart's slowest mode;
+``resid_<output>.png`` the residual analysis of the final chart (autocorrelation and cross-correlation with
+each input, 99 % band; see :mod:`.figures`). Written like the identify figures: an Agg canvas per figure,
+rendered to bytes and written atomically.
 """
 
 from __future__ import annotations
 
-import io
 from pathlib import Path
 
 import numpy as np
 
-from ..atomic import atomic_write_bytes
 from ..data.csvdata import Dataset
+from ..diagnose.loop import Diagnosis, Fitted
+from ..fit.correlation import LEVEL, bound, xcorr
 from ..identify.compare import signal_units
-from ..identify.figures import resid_figure, safe_name
 from ..identify.problem import build_problem
-from .loop import Diagnosis, Fitted
+from .canvas import new_figure, save_png
+from .figures import axis_label, resid_figure, safe_name
+from .linear import residual_lags
 
 __all__ = ["write_plots", "figures"]
 
@@ -29,19 +31,7 @@ _MAX_POINTS = 20000
 
 
 def _figure(rows: int, cols: int):
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
-
-    fig = Figure(figsize=(4.5 * cols, max(3.0, 2.6 * rows)), dpi=100, layout="constrained")
-    FigureCanvasAgg(fig)
-    return fig, fig.subplots(rows, cols, squeeze=False)
-
-
-def _save(fig, path: Path) -> Path:
-    buffer = io.BytesIO()
-    fig.savefig(buffer, format="png", metadata={"Software": None})
-    atomic_write_bytes(path, buffer.getvalue())
-    return path
+    return new_figure(rows, cols, width=4.5 * cols, height=2.6)
 
 
 def _traces(f: Fitted, train: Dataset, alignment: str, seed: int):
@@ -57,9 +47,17 @@ def _traces(f: Fitted, train: Dataset, alignment: str, seed: int):
     return e, sig, problem.compiled.output_names
 
 
-def figures(diagnosis: Diagnosis, train: Dataset, resid: bool = True) -> list[tuple[str, object]]:
+def whiteness_lags(diagnosis: Diagnosis, train: Dataset, lags: int | None = None) -> tuple[int, str]:
+    """(lags, why) of the before/after autocorrelation: `lags` (``--lags``), else spanning the final chart's
+    slowest mode (:func:`.linear.residual_lags`)."""
+    return residual_lags(diagnosis.final.identification, train.n_rows, lags)
+
+
+def figures(diagnosis: Diagnosis, train: Dataset, resid: bool = True,
+            lags: int | None = None) -> list[tuple[str, object]]:
     """(file name, matplotlib Figure) of every figure of the module docstring; `resid` False leaves out the
-    residual analysis of the final chart (the HTML report draws it with the final fit)."""
+    residual analysis of the final chart (the HTML report draws it with the final fit); `lags` of the
+    autocorrelations (default: spanning the final chart's slowest mode)."""
     settings = diagnosis.report["settings"]
     alignment, seed = settings["alignment"], settings["seed"]
     if settings.get("split") is not None:
@@ -71,6 +69,8 @@ def figures(diagnosis: Diagnosis, train: Dataset, resid: bool = True) -> list[tu
     measured = {n: np.asarray(train.columns[n])[first:] for n in names}  # outputs on the fitted rows
     out = []
     rng = np.random.default_rng(0)
+    units = signal_units(diagnosis.final.diagram)
+    blocks = {b.name: b.unit for b in diagnosis.final.diagram.blocks}
     for a in diagnosis.report["accepted"]:
         at = a["at"]
         # one abscissa for both panels: the measured signal, else the final chart's (the better estimate)
@@ -85,36 +85,40 @@ def figures(diagnosis: Diagnosis, train: Dataset, resid: bool = True) -> list[tu
                 ax = axes[i, j]
                 ax.plot(x[pick], e[pick, i], ".", ms=1.5, color="tab:blue" if j == 0 else "tab:green")
                 ax.axhline(0.0, color="0.3", lw=0.6)
-                ax.set_xlabel(at)
-                ax.set_ylabel(f"residual {out_name}")
+                ax.set_xlabel(axis_label(at, units.get(at) or blocks.get(at)))
+                ax.set_ylabel(axis_label(f"residual {out_name}", units.get(out_name)))
                 ax.set_title(f"{title}: {a['effect']} at {at}", fontsize=9)
         out.append((f"residual_{a['effect']}_{at}.png", fig))
-    w = diagnosis.report.get("whiteness", {})
-    if "autocorrelation" in (w.get("before") or {}) and "autocorrelation" in (w.get("after") or {}):
+    lags, why = whiteness_lags(diagnosis, train, lags)
+    finite = e0 is not None and e1 is not None and np.all(np.isfinite(e0)) and np.all(np.isfinite(e1))
+    if finite and e0.shape[0] > lags:
+        # the residuals drawn above, over lags that span the final chart's dynamics (REPORT.json's own test
+        # keeps MATLAB's 25 lags)
         fig, axes = _figure(len(names), 1)
+        k = np.arange(1, lags + 1)
+        band = bound(e0.shape[0], LEVEL)
         for i, out_name in enumerate(names):
             ax = axes[i, 0]
-            for key, color in (("before", "tab:blue"), ("after", "tab:green")):
-                s = w[key]["autocorrelation"][out_name]
-                ax.plot(s["lags"], s["r"], "o-", ms=3, color=color, label=key)
-            band = w["after"]["bound"]
-            ax.axhspan(-band, band, color="0.85", label=f"{100 * w['after']['level']:g} % band ±{band:.3g}")
-            ax.set_xlabel("lag (samples)")
+            for e, key, color in ((e0, "chart as given", "tab:blue"), (e1, "final chart", "tab:green")):
+                ax.plot(k, xcorr(e[:, i], e[:, i], k), "o-", ms=2, lw=0.8, color=color, label=key)
+            ax.axhspan(-band, band, color="0.85", label=f"{100 * LEVEL:g} % band ±{band:.3g}")
+            ax.set_xlabel(f"lag in samples (one sample = {diagnosis.final.diagram.sample_time:g} s); {lags} lags, "
+                          f"{why}")
             ax.set_ylabel(f"autocorrelation {out_name}")
             ax.legend(fontsize=8, loc="upper right")
         out.append(("whiteness.png", fig))
     if resid and e1 is not None:  # MATLAB's resid figure of the final chart, one per output
         u = np.column_stack([s1[n] for n in inputs])
-        units = signal_units(diagnosis.final.diagram)
         for j, name in enumerate(names):
             if np.all(np.isfinite(e1[:, j])) and e1.shape[0] >= 3:
-                fig = resid_figure(e1[:, j], u, name, inputs, "final chart, training record", units.get(name))
+                fig = resid_figure(e1[:, j], u, name, inputs, "final chart, training record", units.get(name),
+                                   lags, sample_time=diagnosis.final.diagram.sample_time)
                 out.append((f"resid_{safe_name(name)}.png", fig))
     return out
 
 
-def write_plots(diagnosis: Diagnosis, train: Dataset, directory: str | Path) -> list[Path]:
+def write_plots(diagnosis: Diagnosis, train: Dataset, directory: str | Path, lags: int | None = None) -> list[Path]:
     """Write the figures; returns the paths written. Needs matplotlib (checked by the CLI first)."""
     directory = Path(directory)
     directory.mkdir(parents=True, exist_ok=True)
-    return [_save(fig, directory / name) for name, fig in figures(diagnosis, train)]
+    return [save_png(fig, directory / name) for name, fig in figures(diagnosis, train, lags=lags)]

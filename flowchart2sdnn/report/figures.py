@@ -3,9 +3,13 @@
 * :func:`compare_figure`: per record and output, measured and model output over the scored rows with fit % and
   RMS in the legend, units from the chart on the axis, and beside it a zoom on the stretch with the largest
   error (so a fit of 99 % still shows where it misses).
-* :func:`resid_figure`: for one output, the residual's autocorrelation (lags 0..25) and its cross-correlation
-  with each input (lags -25..25), with the 99 % band of a white residual independent of the input drawn and
-  labelled (the numbers of :mod:`flowchart2sdnn.fit.correlation`).
+* :func:`resid_figure`: for one output, the residual's autocorrelation (lags 0..L) and its cross-correlation
+  with each input (lags -L..L), with the 99 % band of a white residual independent of the input drawn and
+  labelled (the numbers of :mod:`flowchart2sdnn.fit.correlation`) and the test's verdict in the title; L is
+  25 unless the caller sets it from the dynamics (a page: the slowest mode's period).
+* :func:`residual_time_figure`: the residual over time, per record and output, RMS in the title.
+
+Numbers in legends and captions are formatted by :func:`fit_number`, as the tables beside them.
 
 Each figure is built on its own Agg canvas (:mod:`.canvas`); ``write_*`` save it atomically.
 """
@@ -18,11 +22,12 @@ from pathlib import Path
 
 import numpy as np
 
-from ..fit.correlation import LEVEL, MAX_LAG, bound, xcorr
-from .canvas import new_figure, save_png
-from .compare import Comparison
+from ..fit.correlation import LEVEL, MAX_LAG, bound, whiteness, xcorr
+from ..identify.compare import Comparison
+from .canvas import new_figure, require_matplotlib, save_png
 
-__all__ = ["axis_label", "compare_figure", "write_compare", "resid_figure", "write_resid", "safe_name"]
+__all__ = ["axis_label", "compare_figure", "write_compare", "resid_figure", "write_resid", "safe_name",
+           "fit_number", "residual_time_figure", "verdict"]
 
 #: the zoom shows this fraction of the record around the largest error (at least _ZOOM_MIN samples): narrow
 #: enough that a sensor-noise-sized error is visible against the signal's range
@@ -37,6 +42,11 @@ def safe_name(name: str) -> str:
 
 def axis_label(name: str, unit: str | None) -> str:
     return f"{name} in {unit}" if unit else name
+
+
+def fit_number(x: float | None) -> str:
+    """A fit % as every table, legend and caption shows it (four significant digits)."""
+    return "n/a" if x is None else f"{x:.4g}"
 
 
 def _number(x: float | None, unit: str | None = None, digits: int = 3) -> str:
@@ -54,7 +64,7 @@ def compare_figure(comparison: Comparison, title: str = ""):
     for (rec, name), (ax, zoom) in zip(rows, axes, strict=True):
         unit = comparison.units.get(name)
         t, y, m = rec.time, rec.measured[name], rec.model[name]
-        label = f"model ({what}): fit {_number(rec.fit_percent[name], '%', 4)}, RMS {_number(rec.rms[name], unit)}"
+        label = f"model ({what}): fit {fit_number(rec.fit_percent[name])} %, RMS {_number(rec.rms[name], unit)}"
         for a, marker in ((ax, None), (zoom, ".")):
             a.plot(t, y, color="0.35", lw=0.8, marker=marker, ms=3, label="measured")
             a.plot(t, m, color="tab:red", lw=1.0, ls="--", label=label)
@@ -87,18 +97,36 @@ def compare_figure(comparison: Comparison, title: str = ""):
 
 def write_compare(comparison: Comparison, path: str | Path, name: str = "") -> Path:
     """Draw :func:`compare_figure` into a PNG file (replaced atomically)."""
-    from .plots import require_matplotlib
-
     require_matplotlib()
     what = "free run" if comparison.horizon is None else f"{comparison.horizon}-step-ahead prediction"
     title = f"{name}: measured and model output ({what})" if name else ""
     return save_png(compare_figure(comparison, title), path)
 
 
+def verdict(residual: np.ndarray, inputs: np.ndarray, output: str, input_names: Sequence[str],
+            max_lag: int = MAX_LAG, level: float = LEVEL) -> str:
+    """The residual test in words: white or not, independent of the inputs or not, with how many lags fall
+    outside the band (the rule of :func:`flowchart2sdnn.fit.correlation.whiteness`)."""
+    e = np.asarray(residual, dtype=float)
+    u = np.atleast_2d(np.asarray(inputs, dtype=float).T).T
+    w = whiteness(e[:, None], u, [output], list(input_names), max_lag, level)
+    auto = w["autocorrelation"][output]
+    words = [f"{'white' if w['white'] else 'not white'} ({auto['outside']} of {max_lag} lags outside the "
+             f"{100 * level:g} % band"
+             + ("" if w["white"] else f", largest |r| {auto['max_abs']:.2f} at lag {auto['lag_of_max']}") + ")"]
+    for i, (name, c) in enumerate(w["cross_correlation"][output].items()):
+        ok = whiteness(e[:, None], u[:, [i]], [output], [name], max_lag, level)["independent"]  # this input alone
+        words.append(f"{'independent of' if ok else 'correlated with'} {name} ({c['outside']} of "
+                     f"{2 * max_lag + 1} lags outside" + ("" if ok else f", largest at lag {c['lag_of_max']}") + ")")
+    return "; ".join(words)
+
+
 def resid_figure(residual: np.ndarray, inputs: np.ndarray, output: str, input_names: Sequence[str],
-                 title: str = "", unit: str | None = None, max_lag: int = MAX_LAG, level: float = LEVEL):
+                 title: str = "", unit: str | None = None, max_lag: int = MAX_LAG, level: float = LEVEL,
+                 sample_time: float | None = None):
     """Residual analysis of one output: autocorrelation (lags 0..max_lag) and cross-correlation with each
-    input (lags -max_lag..max_lag, positive: the input leads), with the `level` band of white noise."""
+    input (lags -max_lag..max_lag, positive: the input leads), with the `level` band of white noise; with
+    `sample_time` a second axis gives the lag in seconds."""
     e = np.asarray(residual, dtype=float)
     u = np.atleast_2d(np.asarray(inputs, dtype=float).T).T
     band = bound(e.size, level)
@@ -124,17 +152,41 @@ def resid_figure(residual: np.ndarray, inputs: np.ndarray, output: str, input_na
         ax.set_xlim(lags[0] - 0.5, lags[-1] + 0.5)
         ax.grid(alpha=0.3)
         ax.legend(loc="best", fontsize="small", framealpha=0.85)
-    axes[-1, 0].set_xlabel("lag in samples")
+        if sample_time:
+            top = ax.secondary_xaxis("top", functions=(lambda k: k * sample_time, lambda t: t / sample_time))
+            top.tick_params(labelsize="small")
+    axes[-1, 0].set_xlabel("lag in samples" + (f" (one sample = {sample_time:g} s; top axis: lag in s)"
+                                               if sample_time else ""))
     rms = float(np.sqrt(np.mean(e**2))) if e.size and np.all(np.isfinite(e)) else None
     head = f" ({title})" if title else ""
-    fig.suptitle(f"residual analysis of {output}{head}\n{e.size} samples, RMS {_number(rms, unit)}",
-                 fontsize="medium")
+    fig.suptitle(f"residual analysis of {output}{head}\n{e.size} samples, RMS {_number(rms, unit)}: "
+                 + verdict(e, u, output, input_names, max_lag, level).split(";")[0], fontsize="medium", wrap=True)
+    return fig
+
+
+def residual_time_figure(comparison: Comparison, title: str = ""):
+    """Measured minus model output over time: one row per record and output, RMS and largest error in the
+    title, the output's unit on the axis."""
+    rows = [(r, name) for r in comparison.records for name in comparison.outputs]
+    fig, axes = new_figure(len(rows), 1, width=12.0, height=2.2)
+    for (rec, name), ax in zip(rows, axes[:, 0], strict=True):
+        unit = comparison.units.get(name)
+        e = rec.measured[name] - rec.model[name]
+        ax.plot(rec.time, e, color="tab:purple", lw=0.6)
+        ax.axhline(0.0, color="0.3", lw=0.6)
+        ax.set_ylabel(axis_label(f"{name} residual", unit))
+        ax.set_title(f"{rec.label}: {name} measured - model, RMS {_number(rec.rms[name], unit)}, largest "
+                     f"{_number(rec.max_error[name], unit)}", fontsize="medium", loc="left")
+        ax.grid(alpha=0.3)
+        ax.set_xlabel("time in s")
+    if title:
+        fig.suptitle(title)
     return fig
 
 
 def write_resid(residual: np.ndarray, inputs: np.ndarray, outputs: Sequence[str], input_names: Sequence[str],
                 directory: str | Path, title: str = "", units: dict | None = None,
-                prefix: str = "resid") -> list[Path]:
+                prefix: str = "resid", max_lag: int = MAX_LAG, sample_time: float | None = None) -> list[Path]:
     """One residual-analysis PNG per output, ``<prefix>_<output>.png`` in `directory`; skips a residual that
     is not finite (a diverged run has nothing to analyse)."""
     e = np.atleast_2d(np.asarray(residual, dtype=float).T).T
@@ -142,6 +194,7 @@ def write_resid(residual: np.ndarray, inputs: np.ndarray, outputs: Sequence[str]
     for j, name in enumerate(outputs):
         if not np.all(np.isfinite(e[:, j])) or e.shape[0] < 3:
             continue
-        fig = resid_figure(e[:, j], inputs, name, input_names, title, (units or {}).get(name))
+        fig = resid_figure(e[:, j], inputs, name, input_names, title, (units or {}).get(name), max_lag,
+                           sample_time=sample_time)
         written.append(save_png(fig, Path(directory) / f"{prefix}_{safe_name(name)}.png"))
     return written

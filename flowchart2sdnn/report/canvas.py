@@ -10,8 +10,21 @@ import io
 from pathlib import Path
 
 from ..atomic import atomic_write_bytes
+from ..errors import SdnnError
 
-__all__ = ["new_figure", "png_bytes", "save_png"]
+__all__ = ["new_figure", "png_bytes", "save_png", "require_matplotlib"]
+
+_INSTALL = "pip install flowchart2sdnn[plots]"
+
+
+def require_matplotlib(option: str = "--plots") -> None:
+    """Raise a one-line SdnnError (PLOT001) naming `option` and the install command when matplotlib is missing."""
+    try:
+        import matplotlib  # noqa: F401
+        from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: F401
+    except ImportError:
+        raise SdnnError.at("PLOT001", f"{option} needs matplotlib, which is not installed: {_INSTALL}", option,
+                           hint=_INSTALL) from None
 
 
 def new_figure(rows: int, cols: int = 1, width: float = 9.0, height: float = 2.4, **subplots):

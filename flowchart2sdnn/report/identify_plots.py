@@ -27,24 +27,16 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SdnnError
-from .canvas import new_figure, save_png
-from .problem import columns_of
+from ..identify.arrays import columns_of
+from ..identify.compare import compare_fit, record_theta, signal_units
+from .canvas import new_figure, require_matplotlib, save_png
+from .figures import axis_label, write_compare, write_resid
+from .linear import residual_lags
 
-__all__ = ["require_matplotlib", "write_plots", "curve_input_range"]
+__all__ = ["write_plots", "curve_input_range", "curve_figure", "resid_inputs"]
 
-_INSTALL = "pip install flowchart2sdnn[plots]"
 # resolving a signal through gains and sums: charts nest only a few levels; the limit guards cycles
 _MAX_DEPTH = 32
-
-
-def require_matplotlib(option: str = "--plots") -> None:
-    """Raise a one-line SdnnError (PLOT001) naming `option` and the install command when matplotlib is missing."""
-    try:
-        import matplotlib  # noqa: F401
-        from matplotlib.backends.backend_agg import FigureCanvasAgg  # noqa: F401
-    except ImportError:
-        raise SdnnError.at("PLOT001", f"{option} needs matplotlib, which is not installed: {_INSTALL}", option,
-                           hint=_INSTALL) from None
 
 
 def _figure(rows: int, width: float = 9.0, height: float = 2.4):
@@ -107,9 +99,10 @@ def curve_input_range(outcome, block: str) -> tuple[float, float] | None:
     """(min, max) of the signal feeding nonlinear `block` in a free run over the training record, or None."""
     problem = outcome.problem
     b = next(b for b in outcome.diagram.blocks if b.name == block)
+    theta = record_theta(outcome, 0)  # the training record's own values, as its fit
     with np.errstate(all="ignore"):
-        signals = problem.compiled.signals(outcome.x, problem.inputs, problem.init)
-    params, _ = problem.compiled.values(outcome.x)
+        signals = problem.compiled.signals(theta, problem.inputs, problem.init)
+    params, _ = problem.compiled.values(theta)
     term = b.inputs[0]
     x = _signal_values(term.signal, term.sign, outcome, signals, params)
     if x is None:
@@ -189,7 +182,8 @@ def _plot_parameters(outcome, directory: Path) -> Path | None:
     return _save(fig, directory / "parameters.png")
 
 
-def _plot_curve(outcome, block: str, weights, directory: Path) -> Path:
+def curve_figure(outcome, block: str, weights):
+    """The learned curve of `block` over the range of the signal feeding it in the training record (shaded)."""
     span = curve_input_range(outcome, block)
     if span is None or not span[1] > span[0]:
         # unknown or constant input: show where the neurons bend (|a x + b| <= 3)
@@ -209,24 +203,28 @@ def _plot_curve(outcome, block: str, weights, directory: Path) -> Path:
         ax.legend(loc="best", fontsize="small")
     b = next(b for b in outcome.diagram.blocks if b.name == block)
     source = str(b.inputs[0])
-    unit = f" in {b.unit}" if b.unit else ""
-    ax.set_xlabel(source)
-    ax.set_ylabel(f"{block}{unit}")
+    units = {**{x.name: x.unit for x in outcome.diagram.blocks}, **signal_units(outcome.diagram)}
+    ax.set_xlabel(axis_label(source, units.get(b.inputs[0].signal)))
+    ax.set_ylabel(axis_label(block, b.unit))
     ax.grid(alpha=0.3)
     state = "fixed" if weights.fixed else "identified"
     ax.set_title(f"{block} = f({source}), {len(weights.a)} tanh neurons ({state})", fontsize="medium")
+    return fig
+
+
+def _plot_curve(outcome, block: str, weights, directory: Path) -> Path:
     safe = re.sub(r"[^A-Za-z0-9_.-]", "_", block)
-    return _save(fig, directory / f"curve_{safe}.png")
+    return _save(curve_figure(outcome, block, weights), directory / f"curve_{safe}.png")
 
 
-def _resid_inputs(data, names, rows: int, alignment: str) -> np.ndarray:
+def resid_inputs(data, names, rows: int, alignment: str) -> np.ndarray:
     """The inputs acting on the last `rows` rows of `data` (zoh: input k-1 acts on row k)."""
     u = columns_of(data, names)
     shift = 1 if alignment == "zoh" else 0
     return u[data.n_rows - rows - shift:data.n_rows - shift]
 
 
-def write_plots(outcome, directory: str | Path, records=(), validation=()) -> list[Path]:
+def write_plots(outcome, directory: str | Path, records=(), validation=(), lags: int | None = None) -> list[Path]:
     """Draw the figures of an identification into `directory` (created if needed); return the files written.
 
     Parameters
@@ -238,6 +236,8 @@ def write_plots(outcome, directory: str | Path, records=(), validation=()) -> li
     records, validation : sequences of (label, Dataset, score_from), optional
         The training and validation records to compare the model with in ``compare.png`` (rows before
         `score_from` are run but not shown: a validation after a split). Without them no compare.png.
+    lags : int, optional
+        Lags of the residual analysis; default spanning the slowest mode of the linearised chart, as the page.
 
     Returns
     -------
@@ -252,9 +252,6 @@ def write_plots(outcome, directory: str | Path, records=(), validation=()) -> li
     SdnnError
         PLOT001 when matplotlib is missing, PLOT002 when the directory cannot be created.
     """
-    from .compare import compare_records, signal_units
-    from .figures import write_compare, write_resid
-
     require_matplotlib()
     directory = Path(directory)
     try:
@@ -264,23 +261,27 @@ def write_plots(outcome, directory: str | Path, records=(), validation=()) -> li
                            str(directory)) from None
     problem = outcome.problem
     names = list(problem.compiled.output_names)
-    with np.errstate(all="ignore"):
-        yhat = problem.compiled.simulate(outcome.x, problem.inputs, problem.init)
+    with np.errstate(all="ignore"):  # the first training record with its own per-record values, as the table
+        yhat = problem.compiled.simulate(record_theta(outcome, 0), problem.inputs, problem.init)
     y = problem.targets
     t = _times(outcome)
     written = [_plot_output(outcome, t, y, yhat, names, directory), _plot_residual(t, y, yhat, names, directory)]
     inputs = list(problem.compiled.input_names)
     units = signal_units(outcome.diagram)
-    written += write_resid(y - yhat, problem.inputs, names, inputs, directory, "training", units)
+    lags, _ = residual_lags(outcome, len(y), lags)
+    step = outcome.diagram.sample_time
+    written += write_resid(y - yhat, problem.inputs, names, inputs, directory, "training", units, max_lag=lags,
+                           sample_time=step)
     every = [*records, *validation]
     if every:
-        comparison = compare_records(problem.compiled, outcome.x, every, problem.alignment, None, outcome.diagram)
+        comparison = compare_fit(outcome, records, validation)
         written.append(write_compare(comparison, directory / "compare.png", outcome.diagram.name))
         if validation:
             rec, (label, data, _) = comparison.records[len(records)], validation[0]
             e = np.column_stack([rec.measured[n] - rec.model[n] for n in names])
-            u = _resid_inputs(data, inputs, rec.rows, problem.alignment)
-            written += write_resid(e, u, names, inputs, directory, label, units, prefix="resid_validation")
+            u = resid_inputs(data, inputs, rec.rows, problem.alignment)
+            written += write_resid(e, u, names, inputs, directory, label, units, prefix="resid_validation",
+                                   max_lag=lags, sample_time=step)
     params_png = _plot_parameters(outcome, directory)
     if params_png is not None:
         written.append(params_png)

@@ -1,61 +1,24 @@
 """The frequency response of a linearised chart over the one measured in data: the Bode figure.
 
-The empirical estimate is Welch's H1 (scipy.signal): H1(f) = S_uy(f) / S_uu(f) from averaged, Hann-windowed
-segments, with the magnitude-squared coherence |S_uy|^2 / (S_uu S_yy) beside it: where the coherence is well
-below 1 the estimate is noise, leakage or nonlinearity (a friction that the linear model leaves out), or the
-input was fed back from the output (the relay of the virtual bench), which biases H1. The data's zero-order
-hold adds half a sample of delay (phase T omega / 2), which the continuous model does not show.
+The measured response is Welch's H1 with its coherence (:mod:`flowchart2sdnn.analysis.response`); it is drawn
+faint, phase left out, where the coherence is below 0.5.
 """
 
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..analysis.linearize import LinearModel
-from .canvas import new_figure, save_png
+from ..analysis.response import Empirical
+from .canvas import new_figure, require_matplotlib, save_png
 
-__all__ = ["Empirical", "empirical_response", "bode_figure", "write_bode"]
+__all__ = ["bode_figure", "write_bode"]
 
 #: below this coherence the measured response is drawn faint and its phase left out
 _COHERENT = 0.5
-
-
-@dataclass(frozen=True, eq=False)
-class Empirical:
-    """An H1 estimate of one input -> output pair: frequencies (Hz), H1 (complex), coherence, segment length."""
-
-    input: str
-    output: str
-    f: np.ndarray
-    h: np.ndarray
-    coherence: np.ndarray
-    nperseg: int
-
-
-def empirical_response(u: np.ndarray, y: np.ndarray, sample_time: float, input_name: str = "u",
-                       output_name: str = "y", nperseg: int | None = None) -> Empirical:
-    """Welch's H1 estimate from input samples `u` and output samples `y` (same rows, time step `sample_time`).
-
-    `nperseg` defaults to the largest power of two giving at least 8 segments (at most 8192 samples).
-    """
-    from scipy.signal import coherence, csd, welch
-
-    u = np.asarray(u, dtype=float)
-    y = np.asarray(y, dtype=float)
-    if nperseg is None:
-        nperseg = int(2 ** max(4, min(13, math.floor(math.log2(max(len(u) // 8, 16))))))
-    fs = 1.0 / sample_time
-    f, puu = welch(u, fs=fs, nperseg=nperseg)
-    _, puy = csd(u, y, fs=fs, nperseg=nperseg)
-    _, coh = coherence(u, y, fs=fs, nperseg=nperseg)
-    with np.errstate(divide="ignore", invalid="ignore"):
-        h = puy / puu
-    keep = f > 0
-    return Empirical(input_name, output_name, f[keep], h[keep], coh[keep], nperseg)
 
 
 def _unit_ratio(out: str | None, inp: str | None) -> str:
@@ -123,12 +86,11 @@ def bode_figure(model: LinearModel, estimates: list[Empirical] = (), f_max: floa
             phase.set_xlabel("frequency in Hz")
         mag.set_xlim(lo, hi)
     point = ", ".join(f"{k} = {v:g}" for k, v in model.at.items())
-    fig.suptitle(f"{model.name}: Bode plot of the model linearised at {point}", fontsize="medium")
+    # the operating point on a line of its own, wrapped: a drive with many states has a long one
+    fig.suptitle(f"{model.name}: Bode plot of the model linearised at\n{point}", fontsize="medium", wrap=True)
     return fig
 
 
 def write_bode(model: LinearModel, path: str | Path, estimates: list[Empirical] = ()) -> Path:
-    from .plots import require_matplotlib
-
     require_matplotlib()
     return save_png(bode_figure(model, list(estimates)), path)

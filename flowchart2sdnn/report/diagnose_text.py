@@ -3,8 +3,8 @@
 from __future__ import annotations
 
 from ..identify.document import from_document
-from ..identify.summary import format_result
 from ..tables import table
+from .identify_text import format_result
 
 __all__ = ["format_report", "STOP_MESSAGES"]
 

@@ -4,20 +4,33 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 
-from ..fit.stoprule import status_line
+from ..fit.stoprule import status_line as rule_line
+from ..identify.result import Identification
 from ..tables import table
-from .result import Identification
 
-__all__ = ["format_result"]
+__all__ = ["format_result", "status_line", "warning_lines"]
 
 
 def _g(x) -> str:
     return "" if x is None else f"{x:.6g}"
 
 
+def status_line(result: Identification) -> str:
+    """The status as the summary's first line says it: the optimizer's status word and the one rule that fired,
+    by name, with its numbers."""
+    return rule_line(result.status, result.message, result.converged)
+
+
+def warning_lines(result: Identification) -> list[str]:
+    """The warnings the summary prints, in its order (the multi-start message is its own line, not repeated);
+    the HTML page shows the same list."""
+    shown = {result.multistart.message} if result.multistart else set()
+    return [w for w in result.warnings if w not in shown]
+
+
 def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str:
     """The parameter table, learned curves, fit table, multi-start line and warnings, as text."""
-    out = [status_line(result.status, result.message, result.converged)]  # the stop rule that fired, by name
+    out = [status_line(result)]
     rows = []
     for name, p in result.parameters.items():
         ci = f"[{_g(p.ci95[0])}, {_g(p.ci95[1])}]" if p.ci95 else ""
@@ -63,10 +76,7 @@ def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str
     if ms and ms.n > 1:
         out.append("")
         out.append(f"multi-start: {ms.n} starts, best #{ms.best_index}; {ms.message}")
-    shown = {ms.message} if ms else set()
-    for w in result.warnings:
-        if w not in shown:
-            out.append(f"warning: {w}")
+    out += [f"warning: {w}" for w in warning_lines(result)]
     return "\n".join(out) + "\n"
 
 
