@@ -78,7 +78,7 @@ def _run(args: list[str], monkeypatch) -> tuple[int, list[str]]:
 
 def _identify(records, monkeypatch, *extra) -> tuple[Path, list[str], list[str]]:
     d = records
-    args = [str(d / "r1.csv"), str(d / "r2.csv"), str(d / "r3.csv"), "--diagram", str(d / "motor_offset.yaml"),
+    args = [str(d / "motor_offset.yaml"), str(d / "r1.csv"), str(d / "r2.csv"), str(d / "r3.csv"),
             "--validate", str(d / "val.csv"), "--init-window", "150", "--html", str(d / "page.html"), "--force",
             *extra]
     code, printed = _run(["identify", *args], monkeypatch)
@@ -175,7 +175,7 @@ def test_the_page_shows_every_warning_and_note_the_diagnose_command_printed(tmp_
         write_csv(tmp_path / f"{name}.csv", {"time": ds.time, "F": ds.columns["F"], "v": ds.columns["v"]})
     # semicolons in the training record: the command notes the delimiter it detected
     (tmp_path / "train.csv").write_text((tmp_path / "train.csv").read_text().replace(",", ";"))
-    args = ["diagnose", str(tmp_path / "train.csv"), "--diagram", str(DATA / "one_mass.yaml"), "--validate",
+    args = ["diagnose", str(DATA / "one_mass.yaml"), str(tmp_path / "train.csv"), "--validate",
             str(tmp_path / "val.csv"), "--effects", "friction,damping", "--rounds", "1", "--max-iter", "3",
             "--allow-unconverged", "--init-window", "100", "--html", str(tmp_path / "d.html")]
     code, printed = _run(args, monkeypatch)
