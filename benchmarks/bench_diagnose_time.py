@@ -55,7 +55,7 @@ def one_draw(family: str, missing: str, seed: int, workers: int, live: bool = Fa
     train = record(plant, 30.0, seed, 0.01)
     val = record(plant, 15.0, seed + 1, 0.01)
     marks = []
-    t0 = time.perf_counter()
+    t0, c0 = time.perf_counter(), time.process_time()
 
     def progress(text, fraction=None):
         if text.startswith("LM iteration") and marks and marks[-1][1].startswith("LM iteration"):
@@ -70,9 +70,9 @@ def one_draw(family: str, missing: str, seed: int, workers: int, live: bool = Fa
         from flowchart2sdnn.executors import make_executor
         executor = make_executor(workers)
     d = diagnose(chart, train, [val], settings=DiagnoseSettings(seed=seed), progress=progress, executor=executor)
-    secs = time.perf_counter() - t0
+    secs, cpu = time.perf_counter() - t0, time.process_time() - c0
     rep = d.report
-    return {"seed": seed, "family": family, "missing": missing, "seconds": secs, "stop": rep["stop"],
+    return {"seed": seed, "family": family, "missing": missing, "seconds": secs, "cpu": cpu, "stop": rep["stop"],
             "accepted": [f"{a['effect']}@{a['at']}" for a in rep["accepted"]],
             "before": rep["before"]["validation_rms"], "after": rep["after"]["validation_rms"],
             "first_fit": rep["first_fit"]["status"], "timing": rep["timing"], "marks": marks}
@@ -92,7 +92,7 @@ def main() -> None:
     for seed in seeds:
         r = one_draw(args.family, args.missing, seed, args.workers, args.marks)
         t = r["timing"]
-        print(f"{r['family']} missing {r['missing']} seed {seed}: {r['seconds']:.1f} s  first fit {r['first_fit']}  "
+        print(f"{r['family']} missing {r['missing']} seed {seed}: {r['seconds']:.1f} s ({r['cpu']:.1f} s CPU in this process)  first fit {r['first_fit']}  "
               f"accepted {r['accepted'] or 'nothing'}  stop {r['stop']}  validation RMS {r['before']:.4g} -> "
               f"{r['after']:.4g}  (first fit {t['nominal_fit']:.1f} s, screens "
               f"{sum(t['screen']):.1f} s, refits {sum(t['refit']):.1f} s over {len(t['refit'])})", flush=True)
