@@ -16,6 +16,7 @@ from contextlib import contextmanager
 
 import click
 
+from .. import rules
 from ..errors import SdnnError
 
 __all__ = ["fail", "handle_errors", "settings_usage", "executor_options", "force_option", "seed_option",
@@ -353,9 +354,10 @@ def require_figures(plots, html_path) -> None:
         require_matplotlib("--plots" if plots else "--html")
 
 
-def max_iter_option(help: str | None = None, default: int = 100):
+def max_iter_option(help: str | None = None):
     """``--max-iter N``: Levenberg-Marquardt iterations (a safety limit where fits stop on convergence)."""
-    return click.option("--max-iter", type=click.IntRange(min=0), default=default, show_default=True, help=help)
+    return click.option("--max-iter", type=click.IntRange(min=0), default=rules.value("fit_max_iter"),
+                        show_default=True, help=help)
 
 
 def executor_options(work: str):

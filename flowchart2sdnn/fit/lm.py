@@ -29,6 +29,7 @@ import numpy as np
 from scipy import sparse
 from scipy.linalg import LinAlgError, cho_factor, cho_solve, lstsq, solve_triangular
 
+from .. import rules
 from .boxstep import feasible_step
 from .damping import TRAINLM_MU0, first_mu, mu_accepted, mu_refused, nielsen_accepted, nielsen_refused
 from .effective import effective_samples
@@ -131,34 +132,34 @@ class LMOptions:
     variables of :mod:`.transforms`.
     """
 
-    max_iter: int = 100
+    max_iter: int = rules.value("lm_max_iter")
     mu0: float = TRAINLM_MU0
-    mu_inc: float = 10.0
-    mu_dec: float = 0.1
-    mu_max: float = 1e10
-    min_grad: float = 1e-10
-    cost_goal: float = 0.0
-    min_rel_step: float = 1e-12
-    min_rel_cost_change: float = 0.0
-    stall_decrease: float = 0.0
-    stall_iterations: int = 10
-    crawl_decrease: float = 0.0
-    crawl_iterations: int = 100
-    crawl_cost: float = math.inf
-    negligible_gain: float = 0.0
-    negligible_pace: float = 0.0
-    pace_iterations: int = 10
-    pace_left: float = 3.84
-    residual_stride: int = 0
-    max_mu_tries: int = 20
-    mu_min: float = 1e-20
-    tau: float = 0.0
+    mu_inc: float = rules.value("lm_mu_inc")
+    mu_dec: float = rules.value("lm_mu_dec")
+    mu_max: float = rules.value("lm_mu_max")
+    min_grad: float = rules.value("lm_min_grad")
+    cost_goal: float = rules.value("lm_cost_goal")
+    min_rel_step: float = rules.value("lm_min_rel_step")
+    min_rel_cost_change: float = rules.value("lm_min_rel_cost_change")
+    stall_decrease: float = rules.value("lm_stall_decrease")
+    stall_iterations: int = rules.value("lm_stall_iterations")
+    crawl_decrease: float = rules.value("lm_crawl_decrease")
+    crawl_iterations: int = rules.value("crawl_iterations")
+    crawl_cost: float = rules.value("lm_crawl_cost")
+    negligible_gain: float = rules.value("lm_negligible_gain")
+    negligible_pace: float = rules.value("lm_negligible_pace")
+    pace_iterations: int = rules.value("pace_iterations")
+    pace_left: float = rules.value("pace_left")
+    residual_stride: int = rules.value("lm_residual_stride")
+    max_mu_tries: int = rules.value("lm_max_mu_tries")
+    mu_min: float = rules.value("lm_mu_min")
+    tau: float = rules.value("lm_tau")
     scale: str = "none"
     scale_groups: tuple[int, ...] = ()
-    geodesic: float = 0.0
+    geodesic: float = rules.value("lm_geodesic")
     damping: str = "trainlm"
     trial_jacobian: bool = False
-    bound_width: float = 0.0
+    bound_width: float = rules.value("lm_bound_width")
     bounds: str = "transform"
 
     def __post_init__(self) -> None:
@@ -347,7 +348,7 @@ def _over_columns(J, s: np.ndarray):
 
 
 #: A CSR Jacobian's columns with nonzeros in at least this fraction of the rows enter JᵀJ by dense products.
-WIDE_COLUMN = 0.5
+WIDE_COLUMN = rules.value("wide_column")
 
 
 class WideFirstCSR(sparse.csr_matrix):
@@ -893,11 +894,11 @@ def _inner(fun, residual, guard, bounds: Bounds, point: _Point, Ju, g, mu: float
 #: A trust-radius trial whose scaled step is longer than this many times the last accepted step's is simulated
 #: without its Jacobian even with ``trial_jacobian`` (the radius doubles after a good gain ratio: such a step is
 #: twice).
-LONG_STEP = 1.5
+LONG_STEP = rules.value("long_step")
 #: The trust radius's fit ends as converged when the Gauss-Newton step's predicted decrease is below this fraction
 #: of the cost: a change the cost cannot show (on the two-mass bench, 50 000 residuals, trials at the minimum
 #: changed the cost by up to 1.6e-13 of itself whatever the model predicted, 1e-17 or 1e-12 of it).
-COST_ROUNDING = 1e-12
+COST_ROUNDING = rules.value("cost_rounding")
 
 
 def trust_accepted(radius: float, rho: float, step_norm: float) -> float:
@@ -911,7 +912,7 @@ def trust_accepted(radius: float, rho: float, step_norm: float) -> float:
 
 
 #: The trust radius's step length is solved to this fraction of the radius (MINPACK's lmpar takes 0.1).
-RADIUS_TOLERANCE = 1e-6
+RADIUS_TOLERANCE = rules.value("radius_tolerance")
 
 
 def _mu_for_radius(A: np.ndarray, g: np.ndarray, radius: float) -> float:
@@ -990,7 +991,7 @@ def _predicted_decrease(du: np.ndarray, g: np.ndarray, Ju) -> float:
         return float(du @ g) - 0.5 * float(Jdu @ Jdu)
 
 
-GEODESIC_H = 0.1  # the finite-difference step, as a fraction of the step, of the second directional derivative
+GEODESIC_H = rules.value("geodesic_h")  # the finite-difference step, as a fraction of the step, of the second directional derivative
 
 
 def _accelerated(residual, bounds: Bounds, point: _Point, Ju, Jd, A, scale, du, mu: float, alpha: float, counters):
