@@ -85,15 +85,15 @@ _BOOK: tuple[Rule, ...] = (
     _r("lm_bound_width", 0.0, "fraction of the start's distance", "Off: the unit transform of one-sided bounds.",
        "fit.lm.LMOptions.bound_width"),
     _r("wide_column", 0.5, "fraction of the rows", "A sparse column this full is cheaper in dense products.",
-       "fit.lm.WIDE_COLUMN", note="equal to held_chatter, bias_warn, follow_fraction by coincidence"),
+       "fit.steps.WIDE_COLUMN", note="equal to held_chatter, bias_warn, follow_fraction by coincidence"),
     _r("long_step", 1.5, "ratio of scaled steps", "A trust-radius trial longer than this is mostly refused, so "
        "its Jacobian is not simulated with it.", "fit.lm.LONG_STEP", note="equal to local_factor by coincidence"),
     _r("cost_rounding", 1e-12, "fraction of the cost", "A predicted decrease below the cost's rounding cannot be "
-       "seen: the trust-radius fit has converged.", "fit.lm.COST_ROUNDING", note="equal to lm_min_rel_step, initstate_min_rel_cost_change, rcond by coincidence"),
+       "seen: the trust-radius fit has converged.", "fit.stopping.COST_ROUNDING", note="equal to lm_min_rel_step, initstate_min_rel_cost_change, rcond by coincidence"),
     _r("radius_tolerance", 1e-6, "fraction of the radius", "The trust-radius step's length is solved to this "
-       "accuracy (MINPACK's lmpar takes 0.1).", "fit.lm.RADIUS_TOLERANCE", note="equal to fd_step by coincidence"),
+       "accuracy (MINPACK's lmpar takes 0.1).", "fit.steps.RADIUS_TOLERANCE", note="equal to fd_step by coincidence"),
     _r("geodesic_h", 0.1, "fraction of the step", "The finite-difference step of the second directional "
-       "derivative of geodesic acceleration.", "fit.lm.GEODESIC_H", note="equal to lm_mu_dec, negligible_gain by coincidence"),
+       "derivative of geodesic acceleration.", "fit.steps.GEODESIC_H", note="equal to lm_mu_dec, negligible_gain by coincidence"),
     _r("box_theta", 0.995, "fraction of the room", "A step covers at most this share of a quantity's room to its "
        "bound, keeping every iterate strictly feasible (as scipy's trf).", "fit.boxstep.BOX_THETA"),
     _r("bound_nudge", 1e-4, "internal distance", "A start exactly on a bound moves inside by this much in the "
