@@ -215,7 +215,9 @@ _BOOK: tuple[Rule, ...] = (
     _r("max_segments", 256, "segments", "The Jacobian has free states x segments extra dense columns.",
        "identify.shooting.MAX_SEGMENTS"),
     _r("segment_growth", 4, "factor", "Segments grow fourfold a stage; a stage's boundaries are the last one's, "
-       "so its free starts carry over.", "identify.shooting.GROWTH", note="equal to oracle_per_step by coincidence"),
+       "so its free starts carry over.", "identify.shooting.GROWTH",
+       flags=("identify --shooting", "diagnose --shooting", "batch --shooting"),
+       note="equal to oracle_per_step by coincidence"),
     _r("weight_growth", 10.0, "factor", "The continuity weight grows tenfold a stage.",
        "identify.shooting.WEIGHT_GROWTH", note="equal to lm_mu_inc by coincidence"),
     _r("dense_fraction", 0.25, "fraction of the columns", "A Jacobian this full is handed to the trainer dense.",

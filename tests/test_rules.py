@@ -8,6 +8,7 @@ import ast
 import dataclasses
 import importlib
 import itertools
+import re
 from pathlib import Path
 
 import pytest
@@ -149,8 +150,8 @@ def test_the_command_line_shows_the_books_defaults():
             p = params[0]
             if isinstance(p.default, (int, float)) and not isinstance(p.default, bool):
                 assert type(p.default) is type(r.value) and p.default == r.value, (flag, p.default)
-            else:  # a switch or an unset option whose help quotes the number
-                assert f"{r.value:g}" in p.help, (flag, p.help)
+            else:  # a switch, a word or an unset option, whose help quotes the number as a number of its own
+                assert re.search(rf"(?<![\d.]){re.escape(f'{r.value:g}')}(?![\d.])", p.help), (flag, p.help)
 
 
 def test_the_page_is_the_book():

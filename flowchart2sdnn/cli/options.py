@@ -279,9 +279,9 @@ def shooting_option(what: str = "the fit", default: str = "auto"):
     default to auto, diagnose to off (its benches and acceptance were measured single shooting)."""
     return click.option(
         "--shooting", default=default, show_default=True, callback=lambda ctx, param, v: _shooting(v),
-        help=f"Multiple shooting for {what}: 'off'; L: the records cut into segments of L samples, merged x4 "
-             "per stage up to single shooting over whole records; 'auto': L, or off, from how fast a moved start "
-             "grows along the records.")
+        help=f"Multiple shooting for {what}: 'off'; L: the records cut into segments of L samples, merged "
+             f"x{rules.value('segment_growth')} per stage up to single shooting over whole records; 'auto': L, "
+             "or off, from how fast a moved start grows along the records.")
 
 
 def substeps_option():
