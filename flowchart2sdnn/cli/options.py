@@ -354,9 +354,11 @@ def require_figures(plots, html_path) -> None:
         require_matplotlib("--plots" if plots else "--html")
 
 
-def max_iter_option(help: str | None = None):
-    """``--max-iter N``: Levenberg-Marquardt iterations (a safety limit where fits stop on convergence)."""
-    return click.option("--max-iter", type=click.IntRange(min=0), default=rules.value("fit_max_iter"),
+def max_iter_option(help: str | None = None, default: int | None = None):
+    """``--max-iter N``: Levenberg-Marquardt iterations (a safety limit where fits stop on convergence); by default
+    the rule book's ``fit_max_iter``, identify's and diagnose's."""
+    return click.option("--max-iter", type=click.IntRange(min=0),
+                        default=rules.value("fit_max_iter") if default is None else default,
                         show_default=True, help=help)
 
 
