@@ -39,6 +39,7 @@ from .damping import first_mu, mu_accepted, mu_refused, nielsen_accepted, nielse
 from .evaluate import Counters, Point, call_fun, call_residual, cost_of, readonly, try_point
 from .options import LMOptions, LMResult
 from .steps import (
+    TRUST_SHRINK,
     WideFirstCSR,
     column_scale,
     column_sq_sums,
@@ -344,7 +345,7 @@ def _trials(model: _Model, point: Point, Ju, A: np.ndarray, g: np.ndarray, mu: f
         if tiny:  # the cost no longer decreases along steps at rounding level: converged
             return _Outcome(stopping.small_step(tiny), None, mu if radius is None else radius, tiny, rho, math.nan)
         if radius is not None:
-            radius = 0.25 * step_norm
+            radius = TRUST_SHRINK * step_norm
             continue
         if opt.damping == "nielsen":
             mu, nu = nielsen_refused(mu, nu, math.inf)

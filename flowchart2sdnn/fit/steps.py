@@ -23,7 +23,7 @@ from .transforms import Bounds
 __all__ = ["WideFirstCSR", "ScaledColumns", "gram", "times_columns", "over_columns", "column_sq_sums",
            "column_norms", "as_dense", "damped_step", "normal_equations", "column_scale", "scaled_system", "trust_accepted",
            "mu_for_radius", "held_step", "predicted_decrease", "geodesic_step", "WIDE_COLUMN", "RADIUS_TOLERANCE",
-           "GEODESIC_H"]
+           "GEODESIC_H", "TRUST_POOR", "TRUST_GOOD", "TRUST_SHRINK", "TRUST_GROW"]
 
 
 def times_columns(J, s: np.ndarray):
@@ -226,13 +226,21 @@ def scaled_system(Ju, A: np.ndarray, g: np.ndarray, col: np.ndarray | None, e: n
     return Ju, Js, A, gs, scale
 
 
+#: Moré's trust-radius update: a gain ratio below TRUST_POOR shrinks the radius to TRUST_SHRINK of the step
+#: (so does a refusal), one above TRUST_GOOD grows it to TRUST_GROW times the step.
+TRUST_POOR = rules.value("trust_poor_gain")
+TRUST_GOOD = rules.value("trust_good_gain")
+TRUST_SHRINK = rules.value("trust_shrink")
+TRUST_GROW = rules.value("trust_grow")
+
+
 def trust_accepted(radius: float, rho: float, step_norm: float) -> float:
     """The trust radius after an accepted step (Moré 1978): a quarter of the step where the model predicted
     badly, twice the step where it predicted well, unchanged between."""
-    if rho < 0.25:
-        return 0.25 * step_norm
-    if rho > 0.75:
-        return max(radius, 2.0 * step_norm)
+    if rho < TRUST_POOR:
+        return TRUST_SHRINK * step_norm
+    if rho > TRUST_GOOD:
+        return max(radius, TRUST_GROW * step_norm)
     return radius
 
 
