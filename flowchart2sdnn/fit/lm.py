@@ -176,11 +176,9 @@ def levenberg_marquardt(
                 mus = (mu,)
             out = _trials(model, point, Ju, A, g, mu, col, last_step)
             stop, mu = out.stop, out.mu
-            if out.point is None:
+            if out.point is None:  # no trial lowered the cost; `stop` says which rule ended the trials
                 state = (point, mu, costs, mus)
-                if stop is not None:
-                    break
-                continue
+                break
             new = out.point
             last_step = out.step
             if opt.damping == "nielsen":
