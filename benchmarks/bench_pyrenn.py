@@ -40,9 +40,11 @@ import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parent.parent
 sys.path.insert(0, str(ROOT))
+sys.path.insert(0, str(ROOT / "tests"))  # randomnet: the random GDNN is a test fixture
+
+from randomnet import random_gdnn  # noqa: E402
 
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt  # noqa: E402
-from flowchart2sdnn.network.randomnet import random_gdnn  # noqa: E402
 from flowchart2sdnn.network.runtime import CompiledNetwork  # noqa: E402
 
 VENV = Path("/tmp/sdnn-bench-venv")

@@ -3,9 +3,9 @@
 from __future__ import annotations
 
 import numpy as np
+from randomnet import hand_network
 
 from flowchart2sdnn.network.model import WeightSpec
-from flowchart2sdnn.network.randomnet import hand_network
 from flowchart2sdnn.network.runtime import CompiledNetwork
 
 

@@ -157,21 +157,21 @@ def test_a_sparse_jacobian_takes_the_same_box_steps_as_the_dense_one():
 def test_the_damping_for_a_radius_gives_a_step_of_that_length():
     """Oracle: the step solved directly, (A + mu I)^-1 g by numpy, for the mu the secular equation returned;
     a badly scaled A (columns 0.1 to 10) and radii from 1e-3 to half the Gauss-Newton step."""
-    from flowchart2sdnn.fit.lm import RADIUS_TOLERANCE, _mu_for_radius
+    from flowchart2sdnn.fit.steps import RADIUS_TOLERANCE, mu_for_radius
 
     rng = np.random.default_rng(5)
     J = rng.normal(size=(30, 4)) * [1.0, 10.0, 0.1, 1.0]
     A, g = J.T @ J, J.T @ rng.normal(size=30)
     gauss_newton = float(np.linalg.norm(np.linalg.solve(A, g)))
     for radius in (1e-3, 0.1, 0.5 * gauss_newton):
-        mu = _mu_for_radius(A, g, radius)
+        mu = mu_for_radius(A, g, radius)
         assert mu > 0
         assert np.linalg.norm(np.linalg.solve(A + mu * np.eye(4), g)) == pytest.approx(radius, rel=RADIUS_TOLERANCE)
-    assert _mu_for_radius(A, g, 2.0 * gauss_newton) == 0.0  # the Gauss-Newton step fits: no damping
+    assert mu_for_radius(A, g, 2.0 * gauss_newton) == 0.0  # the Gauss-Newton step fits: no damping
 
 
 def test_the_trust_radius_follows_the_gain_ratio():
-    from flowchart2sdnn.fit.lm import trust_accepted
+    from flowchart2sdnn.fit.steps import trust_accepted
 
     assert trust_accepted(4.0, 0.1, 2.0) == 0.5  # a poor model: a quarter of the step taken
     assert trust_accepted(4.0, 0.5, 2.0) == 4.0  # fair: unchanged

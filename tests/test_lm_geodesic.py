@@ -1,13 +1,14 @@
 """Geodesic acceleration (Transtrum & Sethna 2012): the second-order correction against a hand computation on a
 residual that is exactly quadratic, and fits that still end at the known minima (Rosenbrock, NIST Misra1a)."""
 
+from types import SimpleNamespace
+
 import nist_misra1a as misra
 import numpy as np
 import pytest
 
-from flowchart2sdnn.fit import lm as lm_module
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
-from flowchart2sdnn.fit.transforms import Bounds
+from flowchart2sdnn.fit.steps import geodesic_step
 
 
 def rosenbrock(p):
@@ -33,9 +34,8 @@ def test_the_acceleration_is_the_damped_solve_of_the_exact_second_derivative():
     mu = 0.5
     A = J.T @ J
     du = np.linalg.solve(A + mu * np.eye(2), J.T @ e)
-    bounds = Bounds.make(["a", "b"], None, None)
-    point = lm_module._Point(u, u, e, J, 0.5 * float(e @ e))
-    out = lm_module._accelerated(residual, bounds, point, J, J, A, None, du, mu, 1.99, lm_module._Counters())
+    point = SimpleNamespace(u=u, e=e)  # unbounded: the internal coordinates are the quantities
+    out = geodesic_step(residual, point, J, J, A, None, du, mu, 1.99)
     e_vv = -np.einsum("i,kij,j->k", du, C, du)
     a = np.linalg.solve(A + mu * np.eye(2), J.T @ e_vv)
     np.testing.assert_allclose(out, du + 0.5 * a, rtol=1e-7)
@@ -52,13 +52,10 @@ def test_a_step_that_bends_more_than_alpha_falls_back_to_the_plain_step():
     e = residual(u) + 1.0
     A = J.T @ J
     du = np.linalg.solve(A, J.T @ e)
-    point = lm_module._Point(u, u, e, J, 0.5 * float(e @ e))
-    bounds = Bounds.make(["a", "b"], None, None)
-    out = lm_module._accelerated(lambda x: residual(x) + 1.0, bounds, point, J, J, A, None, du, 0.0, 0.75,
-                                 lm_module._Counters())
+    point = SimpleNamespace(u=u, e=e)
+    out = geodesic_step(lambda x: residual(x) + 1.0, point, J, J, A, None, du, 0.0, 0.75)
     np.testing.assert_array_equal(out, du)
-    bent = lm_module._accelerated(lambda x: residual(x) + 1.0, bounds, point, J, J, A, None, 1e-4 * du, 0.0, 0.75,
-                                  lm_module._Counters())
+    bent = geodesic_step(lambda x: residual(x) + 1.0, point, J, J, A, None, 1e-4 * du, 0.0, 0.75)
     assert not np.array_equal(bent, 1e-4 * du)  # a short step on the same curve is bent
 
 
@@ -117,7 +114,7 @@ def test_identify_cli_takes_plain_steps(tmp_path):
 
 
 def test_the_cli_defaults_of_max_iter_are_the_libraries():
-    """The CLI spells the safety limits as literals (it starts without importing the library's settings)."""
+    """The CLI shows the libraries' safety limits (both read them from the rule book, flowchart2sdnn.rules)."""
     from click.testing import CliRunner
 
     from flowchart2sdnn.cli import main

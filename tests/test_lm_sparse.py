@@ -59,10 +59,10 @@ def test_a_sparse_jacobian_with_nan_is_a_divergence():
 
 @pytest.mark.parametrize("order", ["wide first", "shuffled"])
 def test_the_gram_of_a_partly_wide_sparse_jacobian_is_numpys(order):
-    """fit.lm._gram splits a CSR Jacobian into its wide columns (nonzero in most rows: a multiple-shooting fit's
+    """fit.steps.gram splits a CSR Jacobian into its wide columns (nonzero in most rows: a multiple-shooting fit's
     parameters) and the rest (one short block per segment's free start); oracle: numpy's JᵀJ of the dense
     matrix, with the wide columns first (slices) or scattered among the others (index lists)."""
-    from flowchart2sdnn.fit.lm import _gram
+    from flowchart2sdnn.fit.steps import gram
 
     rng = np.random.default_rng(4)
     rows, wide, blocks = 600, 3, 20
@@ -72,14 +72,14 @@ def test_the_gram_of_a_partly_wide_sparse_jacobian_is_numpys(order):
         dense[b * 30:(b + 1) * 30, wide + b] = rng.normal(size=30)
     if order == "shuffled":
         dense = dense[:, rng.permutation(dense.shape[1])]
-    np.testing.assert_allclose(_gram(sparse.csr_matrix(dense)), dense.T @ dense, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(gram(sparse.csr_matrix(dense)), dense.T @ dense, rtol=1e-12, atol=1e-12)
 
 
 def test_a_wide_first_csr_gives_the_gram_of_its_blocks():
     """A WideFirstCSR hands its first columns over dense and the rest as CSR (a multiple-shooting Jacobian:
-    theta's columns in every row); fit.lm._gram builds JᵀJ from them. Oracle: numpy's JᵀJ of the dense matrix;
+    theta's columns in every row); fit.steps.gram builds JᵀJ from them. Oracle: numpy's JᵀJ of the dense matrix;
     blocks of the wrong shape are not used (the matrix's own columns are)."""
-    from flowchart2sdnn.fit.lm import WideFirstCSR, _gram
+    from flowchart2sdnn.fit.steps import WideFirstCSR, gram
 
     rng = np.random.default_rng(5)
     rows, wide, blocks = 400, 3, 16
@@ -89,9 +89,9 @@ def test_a_wide_first_csr_gives_the_gram_of_its_blocks():
         dense[b * 25:(b + 1) * 25, wide + b] = rng.normal(size=25)
     J = WideFirstCSR(dense)
     J.wide, J.rest = dense[:, :wide].copy(), sparse.csr_matrix(dense[:, wide:])
-    np.testing.assert_allclose(_gram(J), dense.T @ dense, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(gram(J), dense.T @ dense, rtol=1e-12, atol=1e-12)
     # the blocks are what the products see: a changed block changes JᵀJ (they are not recomputed from J)
     J.wide = 2.0 * dense[:, :wide]
-    assert not np.allclose(_gram(J)[:wide, :wide], dense[:, :wide].T @ dense[:, :wide])
+    assert not np.allclose(gram(J)[:wide, :wide], dense[:, :wide].T @ dense[:, :wide])
     J.wide = dense[:, :wide + 1].copy()  # a block of the wrong shape: J's own columns instead
-    np.testing.assert_allclose(_gram(J), dense.T @ dense, rtol=1e-12, atol=1e-12)
+    np.testing.assert_allclose(gram(J), dense.T @ dense, rtol=1e-12, atol=1e-12)

@@ -11,7 +11,7 @@ import math
 import numpy as np
 from scipy.optimize import least_squares
 
-from flowchart2sdnn.fit import lm
+from flowchart2sdnn.fit import lm, stopping
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 
 #: every other convergence test off: only the trust radius's own stops can end a run
@@ -51,7 +51,7 @@ def test_a_converged_trust_fit_stops_instead_of_refusing_rounding_level_trials()
 
 def test_without_the_rounding_stop_the_tail_of_refusals_comes_back(monkeypatch):
     """The test above can fail: with the stop disabled the same fit refuses trial after trial."""
-    monkeypatch.setattr(lm, "COST_ROUNDING", -math.inf)
+    monkeypatch.setattr(stopping, "COST_ROUNDING", -math.inf)
     r = _decay_fit()
     assert r.status != "small_cost_change" and r.rejected_cost > 5
 

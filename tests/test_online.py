@@ -15,6 +15,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 from feedback_neuron import feedback_neuron, hand_run
+from randomnet import random_gdnn
 
 from flowchart2sdnn.compiler import compile_file
 from flowchart2sdnn.diagram.validate import load_diagram
@@ -22,7 +23,6 @@ from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.fit.transforms import Bounds
 from flowchart2sdnn.identify import online_kernel as ok
 from flowchart2sdnn.identify.online import OnlineOptions, OnlineRun, quasi_online
-from flowchart2sdnn.network.randomnet import random_gdnn
 from flowchart2sdnn.network.runtime import CompiledNetwork
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 

@@ -10,10 +10,10 @@ from __future__ import annotations
 import numpy as np
 import pytest
 from feedback_neuron import feedback_neuron, hand_run
+from randomnet import random_gdnn
 
 from flowchart2sdnn.identify import online_kernel as ok
 from flowchart2sdnn.identify.online import OnlineOptions, OnlineRun, quasi_online
-from flowchart2sdnn.network.randomnet import random_gdnn
 from flowchart2sdnn.network.runtime import CompiledNetwork
 
 

@@ -4,9 +4,9 @@ from __future__ import annotations
 
 import numpy as np
 import pytest
+from randomnet import hand_network, random_gdnn
 
 from flowchart2sdnn.network.model import FreeWeightSpec, InitialState, ParameterSpec, WeightSpec
-from flowchart2sdnn.network.randomnet import hand_network, random_gdnn
 from flowchart2sdnn.network.runtime import CompiledNetwork
 
 

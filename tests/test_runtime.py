@@ -7,9 +7,9 @@ from pathlib import Path
 
 import numpy as np
 import pytest
+from randomnet import hand_network, random_gdnn
 
 from flowchart2sdnn.network.model import InitialState, WeightSpec
-from flowchart2sdnn.network.randomnet import hand_network, random_gdnn
 from flowchart2sdnn.network.runtime import CompiledNetwork
 
 TRANSFER = {"linear": lambda x: x, "tanh": np.tanh, "sin": np.sin, "cos": np.cos}

@@ -21,7 +21,8 @@ from flowchart2sdnn.cli import main
 from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
-from flowchart2sdnn.fit.lm import LMOptions, _gram, levenberg_marquardt
+from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
+from flowchart2sdnn.fit.steps import gram
 from flowchart2sdnn.identify import shooting
 from flowchart2sdnn.identify.initstate import state_neurons
 from flowchart2sdnn.identify.problem import build_problem
@@ -157,7 +158,7 @@ def test_two_records_jacobian_matches_central_differences(threads, dense_fractio
         np.testing.assert_array_equal(J.wide, J[:, :P].toarray())
         np.testing.assert_array_equal(J.rest.toarray(), J[:, P:].toarray())
         dense = J.toarray()
-        np.testing.assert_allclose(_gram(J), dense.T @ dense, rtol=1e-12, atol=1e-12 * np.abs(dense).max() ** 2)
+        np.testing.assert_allclose(gram(J), dense.T @ dense, rtol=1e-12, atol=1e-12 * np.abs(dense).max() ** 2)
     J = J.toarray() if sparse.issparse(J) else J
     np.testing.assert_array_equal(e, seg.residual(x))
     assert e.size == (129 + 69) * 2 + 6

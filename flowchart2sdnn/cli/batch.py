@@ -71,7 +71,7 @@ def expand_files(patterns: tuple[str, ...], exclude: tuple[str, ...] = ()) -> li
               help="Multi-start per file (seeded starts, the first is the chart's init).")
 @seed_option()
 @max_iter_option("Safety limit on LM iterations: a fit stops when it has converged; one that reaches the "
-                 "limit is reported as not converged.", default=1000)
+                 "limit is reported as not converged.")
 @alignment_option(None)
 @substeps_option()
 @shooting_option("every file's fit")

@@ -10,6 +10,7 @@ from dataclasses import replace
 
 import click
 
+from .. import rules
 from .help import SectionedCommand
 from .options import (
     alignment_option,
@@ -73,11 +74,11 @@ EFFECTS = {"Effect search": ("rounds", "effect_names", "effects_file", "top", "s
               help="Validation record (CSV); repeatable (e.g. several short records of a chaotic drive).")
 @click.option("--split", type=click.FloatRange(0, 1, min_open=True, max_open=True),
               help="Train on this leading fraction of DATA, validate on the rest (default without "
-                   "--validate: 0.7).")
+                   f"--validate: {rules.value('default_split'):g}).")
 @click.option("-o", "--output", type=click.Path(dir_okay=False),
               help="Write the augmented, identified chart (YAML).")
 @click.option("--report", "report_path", type=click.Path(dir_okay=False), help="Write REPORT.json.")
-@click.option("--rounds", type=click.IntRange(min=0), default=3, show_default=True,
+@click.option("--rounds", type=click.IntRange(min=0), default=rules.value("rounds"), show_default=True,
               help="At most this many effects are added.")
 @click.option("--effects", "effect_names", metavar="NAME,NAME",
               help="Effects to try (default: all built-in and all from --effects-file).")
@@ -85,27 +86,27 @@ EFFECTS = {"Effect search": ("rounds", "effect_names", "effects_file", "top", "s
               help="User effects: chart fragments with placeholders (YAML, 'sdnn_effects: 1').")
 @click.option("--plots", type=click.Path(file_okay=False),
               help="Directory for the figures (residual against the traced signal, before and after).")
-@click.option("--refit-iter", type=click.IntRange(min=1), default=40, show_default=True,
+@click.option("--refit-iter", type=click.IntRange(min=1), default=rules.value("refit_iter"), show_default=True,
               help="LM iterations of each brief refit of a candidate.")
 @max_iter_option("Safety limit on LM iterations of the first fit, a finished control and each accepted chart: "
-                 "a fit stops when it has converged; a first fit that reaches the limit is not traced.",
-                 default=1000)  # = DiagnoseSettings.max_iter (not imported here: the CLI starts fast)
-@click.option("--horizon", type=click.IntRange(min=0), default=500, show_default=True,
+                 "a fit stops when it has converged; a first fit that reaches the limit is not traced.")
+@click.option("--horizon", type=click.IntRange(min=0), default=rules.value("horizon"), show_default=True,
               help="Samples of the first stage of the growing-horizon refit of a non-neutral candidate (a gap, "
                    "clip or delay), or of a neutral one whose plain refit is unpredictable (chaotic), from the "
                    "chart as given; 0: off.")
-@click.option("--top", type=click.IntRange(min=1), default=5, show_default=True,
+@click.option("--top", type=click.IntRange(min=1), default=rules.value("top"), show_default=True,
               help="Places refitted per round (the best option of each).")
 @click.option("--second-look/--no-second-look", default=True, show_default=True,
-              help="When no refit of the --top places comes within 5x the noise, refit the next --top places too.")
+              help=f"When no refit of the --top places comes within {rules.value('far_above_noise'):g}x the noise, refit "
+                   "the next --top places too.")
 @click.option("--criterion", type=click.Choice(["aic", "bic"]), default="bic", show_default=True,
               help="Information criterion that must fall for an effect to be accepted.")
-@click.option("--min-gain", type=click.FloatRange(0, 1, max_open=True), default=0.02, show_default=True,
+@click.option("--min-gain", type=click.FloatRange(0, 1, max_open=True), default=rules.value("min_gain"), show_default=True,
               help="The validation RMS must fall by at least this fraction.")
-@click.option("--spread-z", type=click.FloatRange(min=0), default=2.0, show_default=True,
+@click.option("--spread-z", type=click.FloatRange(min=0), default=rules.value("spread_z"), show_default=True,
               help="The validation MSE must fall by more than the floor squared plus this many standard errors of "
                    "its fall, read off the fall's spread over the parts of the validation records (0: off).")
-@click.option("--alpha", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=1e-3,
+@click.option("--alpha", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=rules.value("alpha"),
               show_default=True, help="Significance level of the score test.")
 @click.option("--dead-time-max", type=click.IntRange(min=1, max=10000), default=20, show_default=True,
               help="dead_time scans n = 1..this many samples.")

@@ -10,6 +10,7 @@ from pathlib import Path
 
 import click
 
+from .. import rules
 from .help import SectionedCommand
 from .options import (
     alignment_option,
@@ -83,12 +84,12 @@ __all__ = ["identify"]
                    "quasi-online runs, the one with the lowest final window cost reported.")
 @seed_option("Seed for starts and initial curves.")
 @click.option("--online", is_flag=True, help="Quasi-online LM over a sliding window (paper section 3.1).")
-@click.option("--window", type=click.IntRange(min=2), default=25000, show_default=True,
+@click.option("--window", type=click.IntRange(min=2), default=rules.value("online_window"), show_default=True,
               help="Quasi-online window Q (samples).")
-@click.option("--average", type=click.IntRange(min=1), default=25000, show_default=True,
+@click.option("--average", type=click.IntRange(min=1), default=rules.value("online_average"), show_default=True,
               help="Quasi-online: report the mean over the last K steps.")
 @max_iter_option("Safety limit on LM iterations: a fit stops when it has converged; one that reaches the "
-                 "limit is reported as not converged.", default=1000)
+                 "limit is reported as not converged.")
 @alignment_option()
 @substeps_option()
 @intersample_option()

@@ -16,6 +16,7 @@ from contextlib import contextmanager
 
 import click
 
+from .. import rules
 from ..errors import SdnnError
 
 __all__ = ["fail", "handle_errors", "settings_usage", "executor_options", "force_option", "seed_option",
@@ -278,9 +279,9 @@ def shooting_option(what: str = "the fit", default: str = "auto"):
     default to auto, diagnose to off (its benches and acceptance were measured single shooting)."""
     return click.option(
         "--shooting", default=default, show_default=True, callback=lambda ctx, param, v: _shooting(v),
-        help=f"Multiple shooting for {what}: 'off'; L: the records cut into segments of L samples, merged x4 "
-             "per stage up to single shooting over whole records; 'auto': L, or off, from how fast a moved start "
-             "grows along the records.")
+        help=f"Multiple shooting for {what}: 'off'; L: the records cut into segments of L samples, merged "
+             f"x{rules.value('segment_growth')} per stage up to single shooting over whole records; 'auto': L, "
+             "or off, from how fast a moved start grows along the records.")
 
 
 def substeps_option():
@@ -353,9 +354,12 @@ def require_figures(plots, html_path) -> None:
         require_matplotlib("--plots" if plots else "--html")
 
 
-def max_iter_option(help: str | None = None, default: int = 100):
-    """``--max-iter N``: Levenberg-Marquardt iterations (a safety limit where fits stop on convergence)."""
-    return click.option("--max-iter", type=click.IntRange(min=0), default=default, show_default=True, help=help)
+def max_iter_option(help: str | None = None, default: int | None = None):
+    """``--max-iter N``: Levenberg-Marquardt iterations (a safety limit where fits stop on convergence); by default
+    the rule book's ``fit_max_iter``, identify's and diagnose's."""
+    return click.option("--max-iter", type=click.IntRange(min=0),
+                        default=rules.value("fit_max_iter") if default is None else default,
+                        show_default=True, help=help)
 
 
 def executor_options(work: str):

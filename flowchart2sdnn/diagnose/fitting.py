@@ -12,6 +12,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .. import rules
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
@@ -30,11 +31,11 @@ __all__ = ["DiagnoseSettings", "Fitted", "fit_chart", "with_floor", "fit_growing
            "residual_analysis", "DEFAULT_SPLIT", "VALIDATION_SEGMENTS", "gain_spread", "unpredictable",
            "far_above_noise", "still_moving"]
 
-DEFAULT_SPLIT = 0.7
+DEFAULT_SPLIT = rules.value("default_split")
 #: The validation records are cut into about this many consecutive parts in all (at least 2 per record): the
 #: spread of the validation error's fall from part to part is what a candidate's gain is weighed against
 #: (loop.refusal). 10 parts of a 15 s record are 1.5 s each, 15 periods of the slowest shaft mode of the benches.
-VALIDATION_SEGMENTS = 10
+VALIDATION_SEGMENTS = rules.value("validation_segments")
 
 Progress = Callable[[str, "float | None"], None]
 
@@ -43,18 +44,18 @@ Progress = Callable[[str, "float | None"], None]
 class DiagnoseSettings:
     """Options of :func:`diagnose` (the CLI's flags)."""
 
-    rounds: int = 3
-    top: int = 5
-    top_options: int = 25
-    runners_up: int = 2
-    refit_iter: int = 40
+    rounds: int = rules.value("rounds")
+    top: int = rules.value("top")
+    top_options: int = rules.value("top_options")
+    runners_up: int = rules.value("runners_up")
+    refit_iter: int = rules.value("refit_iter")
     # a safety limit, as identify's: with geodesic LM a complete chart's first fit stops on convergence (physical
     # two-mass charts 24-50 iterations, the learned two-mass chart 490 at noise 0.003, seed 1:
     # bench_false_alarms.py); at 100 the learned charts' first fits stopped unconverged and were not traced
-    max_iter: int = 1000
-    alpha: float = 1e-3
+    max_iter: int = rules.value("fit_max_iter")
+    alpha: float = rules.value("alpha")
     criterion: str = "bic"
-    min_gain: float = 0.02
+    min_gain: float = rules.value("min_gain")
     alignment: str = "zoh"
     seed: int = 0
     split: float | None = None
@@ -68,11 +69,11 @@ class DiagnoseSettings:
     # right basin (0.0595, every linear parameter within 1 %). In addition to the plain refit, not instead: a
     # learned friction curve bent on the first 0.5 s of a 30 s record ends worse (friction bench: validation
     # RMS 0.079 against 0.056)
-    horizon: int = 500
+    horizon: int = rules.value("horizon")
     lm_tau: float = REFIT_TAU  # see identify.settings: the brief refits start next to a fit
     # an effect's validation MSE gain must exceed floor² + spread_z x the standard error of the gain, read off its
     # spread over the parts of the validation records (loop.refusal, gain_spread); 0: no spread test
-    spread_z: float = 2.0
+    spread_z: float = rules.value("spread_z")
     # judge each round's candidates also against the current chart refitted as briefly without any effect
     # (loop._control): False only to measure what that control prevents
     control_refit: bool = True
@@ -219,7 +220,7 @@ def fit_chart(diagram: Diagram, train: list[Dataset], records, settings: Diagnos
 
 #: a brief refit is cut off (:func:`behind`) only after this many iterations: its pace is the mean fall of the
 #: last CUTOFF_PACE iterations
-CUTOFF_PACE = 3
+CUTOFF_PACE = rules.value("cutoff_pace")
 
 
 def behind(target: float, max_iter: int):

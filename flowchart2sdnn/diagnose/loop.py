@@ -36,6 +36,7 @@ import time
 from collections.abc import Callable, Sequence
 from dataclasses import replace
 
+from .. import rules
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
@@ -120,7 +121,7 @@ def _prefix_screen(cands: list[Candidate], current: Fitted, problem, train: list
 #: Above what the discretization floor leaves on the benches' complete charts (at most 4x the noise: three-mass
 #: drive at `substeps: 1`, noise 0.003), far below a chart that misses an effect outright (tanks bench, seed 2:
 #: the best of the 5 places, an input clip, refitted to 19x; the spill, the 6th place, to 2.3x).
-SECOND_LOOK = 5.0
+SECOND_LOOK = rules.value("far_above_noise")
 
 
 def _second_look(scr: Screen, best: list[Score], refits: list[tuple[Score, Fitted]], train: list[Dataset],

@@ -47,6 +47,7 @@ import numpy as np
 from scipy.linalg import eigh
 from scipy.stats import chi2
 
+from .. import rules
 from ..data.csvdata import Dataset
 from ..diagram.curves import weight_names
 from ..diagram.model import Diagram
@@ -59,7 +60,7 @@ from .graph import Place
 __all__ = ["RCOND", "Candidate", "Baseline", "Score", "Screen", "gauss_newton_decrease", "new_quantities", "screened",
            "screen"]
 
-RCOND = 1e-12
+RCOND = rules.value("rcond")
 
 
 @dataclass(frozen=True, eq=False)

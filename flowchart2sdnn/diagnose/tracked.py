@@ -32,6 +32,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .. import rules
 from ..data.csvdata import Dataset
 from ..errors import SdnnError
 from ..identify.problem import Problem, build_problem
@@ -43,11 +44,11 @@ __all__ = ["WINDOW", "FOLLOW_FRACTION", "ROWS_PER_QUANTITY", "tracked_rows", "re
 
 #: rows of the running mean square: the mean square of 100 rows of white noise (per output) spreads by
 #: sqrt(2/100) = 14 %, far inside the bound, so noise alone does not end the tracked part
-WINDOW = 100
+WINDOW = rules.value("tracked_window")
 #: the tracked part ends where the running RMS reaches this fraction of the record's whole residual RMS
-FOLLOW_FRACTION = 0.5
+FOLLOW_FRACTION = rules.value("follow_fraction")
 #: the tracked part's floor: this many rows per fitted quantity (and the growing horizon's first stage)
-ROWS_PER_QUANTITY = 20
+ROWS_PER_QUANTITY = rules.value("rows_per_quantity")
 
 
 def tracked_rows(residual: np.ndarray, window: int = WINDOW, fraction: float = FOLLOW_FRACTION,

@@ -24,10 +24,12 @@ from collections.abc import Callable
 
 import numpy as np
 
+from .. import rules
+
 __all__ = ["BOX_THETA", "feasible_step"]
 
 #: The fraction of its room to a bound a quantity may cover in one step (scipy's trf uses at least 0.995 too).
-BOX_THETA = 0.995
+BOX_THETA = rules.value("box_theta")
 
 
 def feasible_step(x: np.ndarray, dx: np.ndarray, lower: np.ndarray, upper: np.ndarray,

@@ -17,10 +17,12 @@ from collections.abc import Sequence
 import numpy as np
 from scipy.special import ndtri
 
+from .. import rules
+
 __all__ = ["MAX_LAG", "LEVEL", "xcorr", "bound", "whiteness"]
 
-MAX_LAG = 25
-LEVEL = 0.99
+MAX_LAG = rules.value("whiteness_max_lag")
+LEVEL = rules.value("whiteness_level")
 
 
 def bound(n: int, level: float = LEVEL) -> float:

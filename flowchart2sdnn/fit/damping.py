@@ -22,10 +22,12 @@ from __future__ import annotations
 
 import math
 
+from .. import rules
+
 __all__ = ["mu_accepted", "mu_refused", "first_mu", "nielsen_accepted", "nielsen_refused", "TRAINLM_MU0"]
 
 #: trainlm's first damping, every trainer's ``mu0`` unless told otherwise.
-TRAINLM_MU0 = 1e-3
+TRAINLM_MU0 = rules.value("trainlm_mu0")
 
 
 def mu_accepted(mu: float, mu_dec: float, mu_min: float) -> float:

@@ -12,17 +12,18 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import rules
 from .lm import LMResult
 from .transforms import Bounds
 
 __all__ = ["draw_starts", "run_multistart", "MultiStartResult", "QuantitySpread", "NEAR_BEST", "LOCAL_FACTOR"]
 
 #: Runs with cost <= NEAR_BEST * best cost count as "at the best minimum".
-NEAR_BEST = 1.01
+NEAR_BEST = rules.value("near_best")
 #: Runs with cost > LOCAL_FACTOR * best cost are flagged as local minima.
-LOCAL_FACTOR = 1.5
+LOCAL_FACTOR = rules.value("local_factor")
 # Costs below this fraction of the largest start cost are all "zero" (an exact fit), never local minima.
-_ZERO_COST = 1e-14
+_ZERO_COST = rules.value("zero_cost")
 
 
 def draw_starts(

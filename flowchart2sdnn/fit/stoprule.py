@@ -11,7 +11,7 @@ from __future__ import annotations
 import re
 from dataclasses import dataclass
 
-from .lm import CRAWL_DETAIL, STATUS_MESSAGES
+from .stopping import CRAWL_DETAIL, STATUS_MESSAGES
 
 __all__ = ["StopRule", "stop_rule", "status_line"]
 

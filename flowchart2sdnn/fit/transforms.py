@@ -34,11 +34,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import rules
+
 __all__ = ["Bounds", "BOUND_NUDGE"]
 
 #: Internal distance from a bound used when a start value lies exactly on it.  For ``min only`` this
 #: moves x by about ``BOUND_NUDGE**2 / 2`` (5e-9); for two bounds by ``(max-min) * BOUND_NUDGE**2 / 4``.
-BOUND_NUDGE = 1e-4
+BOUND_NUDGE = rules.value("bound_nudge")
 
 
 def _as_bound_array(value, n: int, default: float, what: str) -> np.ndarray:

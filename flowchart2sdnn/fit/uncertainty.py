@@ -14,14 +14,16 @@ from dataclasses import dataclass
 import numpy as np
 from scipy.special import stdtrit
 
+from .. import rules
+
 __all__ = ["Covariance", "covariance", "RANK_RTOL", "CORRELATION_LIMIT"]
 
 #: A singular value of the column-scaled Jacobian below RANK_RTOL * (largest) counts as zero.
-RANK_RTOL = 1e-8
+RANK_RTOL = rules.value("rank_rtol")
 #: Pairs with |correlation| above this are reported as (practically) interchangeable.
-CORRELATION_LIMIT = 0.999
+CORRELATION_LIMIT = rules.value("correlation_limit")
 # A quantity takes part in a null direction when its diagonal of the null-space projector exceeds this.
-_NULL_PART = 1e-2
+_NULL_PART = rules.value("null_part")
 
 
 @dataclass(frozen=True, eq=False)

@@ -30,6 +30,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .. import rules
 from .problem import CHATTER_LIMIT, Problem
 from .workers import run_start
 
@@ -39,18 +40,18 @@ __all__ = ["CurveStart", "STICK_FRACTION", "BRIEF_ITERATIONS", "STEP_LEVEL", "GR
 #: The step neuron's slope at zero as a fraction of the slope at which the network chatters. On the two-mass
 #: bench (truth start, 10 s) the fit's cost against this fraction: 0.05 1.306, 0.1 1.253, 0.2 1.163, 0.3 1.125,
 #: 0.4 1.230, 0.6 1.396, 0.9 1.472 (docs/rough_init.md).
-STICK_FRACTION = 0.3
+STICK_FRACTION = rules.value("stick_fraction")
 #: LM iterations before the step is re-sloped at the fitted physical values (an inertia drawn x/3 moves the
 #: chatter limit x/3; 50 iterations put J2 within 0.3 % on the bench).
-BRIEF_ITERATIONS = 50
+BRIEF_ITERATIONS = rules.value("curve_brief_iterations")
 #: The step's starting output weight, in the curve's output unit (the fit moves it; only its slope is kept).
-STEP_LEVEL = 1.0
+STEP_LEVEL = rules.value("step_level")
 #: Neuron 2's input weight times the RMS of the curve's input (neuron k: 10^-(k-2) times less), one brief fit
 #: each, the lower cost kept. On the two-mass bench (20 rough draws) 1 alone left 2 draws in a minimum 1.3-1.7x
 #: higher (neuron 2 merged with neuron 3 into one linear term), 3 alone 3 others (docs/rough_init.md).
-GRID_TOPS = (1.0, 3.0)
+GRID_TOPS = rules.value("grid_tops")
 #: Bisection range of a slope at zero.
-_SLOPES = (1e-9, 1e12)
+_SLOPES = rules.value("slope_bracket")
 
 
 @dataclass(frozen=True)

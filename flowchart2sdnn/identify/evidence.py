@@ -11,6 +11,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .. import rules
 from ..errors import SdnnError
 from ..fit.uncertainty import covariance
 from .problem import CHATTER_LIMIT, GROWTH_LIMIT, Problem
@@ -19,7 +20,7 @@ from .result import Uncertainty
 __all__ = ["sqrt_domain_warnings", "start_stability", "on_bound_warnings", "no_excitation_message", "Evidence", "assess", "CHATTER_WARN"]
 
 #: Warn when the fitted network is this close to chattering at rest.
-CHATTER_WARN = 0.9
+CHATTER_WARN = rules.value("chatter_warn")
 _INFLATION_NOTE = ("stderr and ci95 are widened by interval_inflation = sqrt((1+rho)/(1-rho)) for the residual's "
                    "lag-1 autocorrelation rho (coloured residuals carry fewer independent samples)")
 

@@ -17,6 +17,7 @@ from collections.abc import Sequence
 
 import numpy as np
 
+from .. import rules
 from ..analysis.loops import delay_rule
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
@@ -29,11 +30,11 @@ __all__ = ["FLOOR_WARN", "oracle_steps", "oracle_rows", "oracle_runs", "measure_
 #: Warn when the floor on an output exceeds this fraction of its residual RMS: from there on the network's own
 #: error is a visible part of what the fit calls model error (at 20 % of the RMS it is 4 % of the squared
 #: residual the parameters are fitted to).
-FLOOR_WARN = 0.2
+FLOOR_WARN = rules.value("floor_warn")
 #: RK4 steps of the oracle per network step (at least 20 per sample, as `simulate --continuous`): RK4's error
 #: falls as h^4, so on any mode the network resolves (omega*h <= 0.01 with `auto`) it is 1e-8 of the signal.
-_ORACLE_PER_STEP = 4
-_ORACLE_MIN = 20
+_ORACLE_PER_STEP = rules.value("oracle_per_step")
+_ORACLE_MIN = rules.value("oracle_min")
 
 
 def oracle_steps(substeps: int) -> int:

@@ -21,6 +21,7 @@ from dataclasses import replace
 
 import numpy as np
 
+from .. import rules
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..fit.lm import LMOptions
@@ -34,14 +35,14 @@ __all__ = ["BIAS_ITER", "BETA_SETTLED", "BIAS_WARN", "estimate_floor_bias", "flo
 #: LM iterations of the bootstrap refit. It starts at theta^, a distance beta (a fraction of a standard error to
 #: a few) from its optimum, on noise-free data, and converges in a few steps: 6-13 on the Coulomb benches (20 s,
 #: auto), 17 at N = 1; stopped after 3, three-mass d1's beta was 0.41 standard errors against 0.98 converged.
-BIAS_ITER = 20
+BIAS_ITER = rules.value("bias_iter")
 #: A refit still unconverged after 2 x BIAS_ITER iterations counts as settled when beta moved by less than this
 #: fraction over the second half (the engine example: its learned friction curve's weights crawl on for hundreds of
 #: iterations, J1's beta moves 1.5 % from 20 to 40 iterations and 0.01 % from 50 to 300).
-BETA_SETTLED = 0.05
+BETA_SETTLED = rules.value("beta_settled")
 #: Warn when |beta| exceeds this many standard errors: from there a 95 % interval (about +-2 standard errors)
 #: centred on theta^ misses the truth visibly more often than 1 in 20.
-BIAS_WARN = 0.5
+BIAS_WARN = rules.value("bias_warn")
 
 
 def _oracle_problem(problem: Problem, chart: Diagram, records: Sequence[Dataset],

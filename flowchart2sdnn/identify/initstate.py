@@ -24,6 +24,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from .. import rules
 from ..data.csvdata import Dataset
 from ..errors import SdnnError
 from ..fit.lm import LMOptions, levenberg_marquardt
@@ -35,9 +36,10 @@ from .problem import columns_of
 __all__ = ["InitialStateFit", "state_neurons", "estimate_initial_state", "FD_STEP"]
 
 #: Relative step of the central differences (times max(1, |state|)).
-FD_STEP = 1e-6
+FD_STEP = rules.value("fd_step")
 # the states' own fit: few unknowns and few rows, converged long before this
-_OPTIONS = LMOptions(max_iter=200, tau=1e-3, scale="jac", min_rel_cost_change=1e-12)
+_OPTIONS = LMOptions(max_iter=rules.value("initstate_max_iter"), tau=rules.value("initstate_tau"), scale="jac",
+                     min_rel_cost_change=rules.value("initstate_min_rel_cost_change"))
 
 
 @dataclass(frozen=True, eq=False)

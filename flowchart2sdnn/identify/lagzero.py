@@ -20,14 +20,16 @@ from __future__ import annotations
 
 import numpy as np
 
+from .. import rules
+
 __all__ = ["LAG_ZERO_Z", "LAG_ZERO_MIN", "lag_zero_correlations", "lag_zero_warnings"]
 
 #: standard deviations of the chance correlation the lag-0 correlation must exceed
-LAG_ZERO_Z = 4.0
+LAG_ZERO_Z = rules.value("lag_zero_z")
 #: ... and at least this correlation (a long record makes tiny correlations significant and harmless)
-LAG_ZERO_MIN = 0.2
+LAG_ZERO_MIN = rules.value("lag_zero_min")
 #: lags summed in Bartlett's variance
-MAX_LAG = 500
+MAX_LAG = rules.value("lag_zero_max_lag")
 
 
 def lag_zero_correlations(problem, x) -> dict[tuple[str, str, str], tuple[float, float]]:

@@ -77,6 +77,7 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
+from .. import rules
 from ..network.rowops import padded
 from ..network.weight_program import WeightProgram, eval_weights, weight_program  # noqa: F401 - re-exported
 from .online_window import (  # noqa: F401 - re-exported: the run's state layout and window numerics
@@ -136,7 +137,7 @@ __all__ = [
 
 #: A trial is accepted when, over its block, the part of its output change that the first-order prediction
 #: misses is at most this fraction of the predicted change (both as sums of squares).
-LINEARITY_TOL = 0.25
+LINEARITY_TOL = rules.value("linearity_tol")
 
 STATUS_OK, STATUS_DIVERGED_BEFORE_START = 0, 1
 

@@ -8,6 +8,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
+from .. import rules
 from ..compiler import compile_diagram
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
@@ -23,9 +24,9 @@ from .curvespan import with_spans
 __all__ = ["Problem", "columns_of", "Segment", "build_problem", "metrics", "combined_metrics", "data_init", "required_columns", "CHATTER_LIMIT"]
 
 #: A trial step whose network chatters at rest (see network.stability) by more than this is rejected.
-CHATTER_LIMIT = 1.0 + 1e-9
+CHATTER_LIMIT = rules.value("chatter_limit")
 #: ... or that drifts away from rest faster than 1 % a sample (e-fold in 100 samples: no drive does that).
-GROWTH_LIMIT = 1.01
+GROWTH_LIMIT = rules.value("growth_limit")
 
 
 def required_columns(diagram: Diagram) -> list[str]:

@@ -3,7 +3,7 @@
 The command line maps its flags onto these names (``--max-iter`` -> ``max_iter``); a bad value raises ValueError
 naming the setting. The first Levenberg-Marquardt damping has one default per use, here, with the reason.
 
-Layer: identify (imports nothing of ours).
+Layer: identify (imports only the rule book, flowchart2sdnn.rules, where its numbers live).
 """
 
 from __future__ import annotations
@@ -11,20 +11,22 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 
+from .. import rules
+
 __all__ = ["IdentifySettings", "SHOOTING", "SHOOTING_STARTS", "IDENTIFY_TAU", "REFIT_TAU", "ONLINE_TAU", "MIN_REL_COST_CHANGE",
            "CONVERGED_DECREASE", "NEGLIGIBLE_GAIN", "NEGLIGIBLE_PACE", "PACE_ITERATIONS", "HELD_CHATTER", "IDENTIFY_SCALE", "IDENTIFY_DAMPING", "LM_DAMPING", "LM_BOUNDS", "FLOOR_BIAS", "CURVE_START"]
 
 #: First LM damping mu = tau * max diag(JᵀJ) (Madsen-Nielsen-Tingleff) for a fit from a chart's rough `init`:
 #: with trainlm's fixed 1e-3 a single start from the paper's Table 1 reached J1 in 2 of 5 seeds, with this 5/5.
-IDENTIFY_TAU = 1e-3
+IDENTIFY_TAU = rules.value("identify_tau")
 #: ... and trainlm's fixed first damping (tau = 0) for diagnose's brief refits, which start next to a fit, where
 #: the scaled damping spends their few iterations on short steps (backlash bench: validation RMS down 3.2x with
 #: 0, 2.2x with 1e-3).
-REFIT_TAU = 0.0
+REFIT_TAU = rules.value("refit_tau")
 #: ... and tau = 1 for the quasi-online window's iterations: with it (and 2 tries, blocks of 500 samples) the
 #: window mode met the paper experiment's acceptance from three of its four starts (docs/paper_experiment.md).
 #: trainlm's own first damping (mu0 = 1e-3) lives with the schedule, in fit/damping.py.
-ONLINE_TAU = 1.0
+ONLINE_TAU = rules.value("online_tau")
 #: LM damps each quantity by its own curvature, (JᵀJ + mu D²) with D the Jacobian's column norms (fit.lm,
 #: MINPACK's and scipy's x_scale='jac'), instead of trainlm's mu I: with mu I a stiffness of ~500 N·m/rad and an
 #: inertia of ~0.4 kg·m² share one damping and rough starts crawl (benchmarks/bench_rough_init.py, 10 s bench:
@@ -34,7 +36,7 @@ IDENTIFY_SCALE = "jac"
 #: simulation per step, refused when the bend exceeds this fraction of the step, Transtrum & Sethna's 0.75).
 #: A learned friction curve's weights and the damping d lie along a narrow curved valley where plain steps are cut
 #: back to a crawl (benchmarks/bench_rough_init.py, learned chart, docs/rough_init.md).
-IDENTIFY_GEODESIC = 0.75
+IDENTIFY_GEODESIC = rules.value("identify_geodesic")
 #: LM moves its damping by Nielsen's rule (fit.damping: mu *= max(1/3, 1 - (2 rho - 1)^3) on an accepted step with gain
 #: ratio rho, x2, x4, ... on refusals in a row) instead of trainlm's x0.1 / x10, which near a minimum swings between a
 #: refused and an accepted mu every iteration (benchmarks/bench_rough_init.py, coulomb: 16 refused trials in 23
@@ -61,11 +63,11 @@ LM_DAMPING = "auto"
 #: iterations), the transform's geodesic steps 1.95x (22); same minima, every draw converged (docs/rough_init.md).
 LM_BOUNDS = "auto"
 #: An LM iteration that gains less than this fraction of the cost ends the fit: further ones only polish noise.
-MIN_REL_COST_CHANGE = 1e-10
+MIN_REL_COST_CHANGE = rules.value("min_rel_cost_change")
 #: A fit has converged when its last 10 iterations together lowered the cost E by less than this many times
 #: E/N (N residuals): a change of the cost is told from noise from about E/N on
 #: (one unit of -2 log-likelihood = N dE/E), so 0.01 means "1 % of what the data could ever show".
-CONVERGED_DECREASE = 0.01
+CONVERGED_DECREASE = rules.value("converged_decrease")
 #: ... and, once the residual RMS is within CRAWL_NOISE of the noise read off the records' second differences
 #: (identify.shooting.noise_level), when its last CRAWL_ITERATIONS iterations together lowered E by less than
 #: CRAWL_DECREASE times E/N: one unit of -2 log-likelihood in 100 iterations. A fit at the noise floor that
@@ -73,21 +75,21 @@ CONVERGED_DECREASE = 0.01
 #: (benchmarks/bench_rough_init.py, 10 s, seed 1) crept 0.3-0.7 E/N per 100 iterations from iteration 300 to
 #: 1750 (b3 and a curve's slope traded, b3's standard error 6x its value), and a run to 3000 iterations in other
 #: coordinates was still creeping (docs/rough_init.md, "The crawl at the noise floor").
-CRAWL_DECREASE = 1.0
-CRAWL_ITERATIONS = 100
-CRAWL_NOISE = 1.2
+CRAWL_DECREASE = rules.value("crawl_decrease")
+CRAWL_ITERATIONS = rules.value("crawl_iterations")
+CRAWL_NOISE = rules.value("crawl_noise")
 #: A fit has converged, wherever it is (at the noise floor or far above it, a chart that lacks an effect), when the
 #: undamped Gauss-Newton step would lower -2 log-likelihood by less than this many units at the residual's own
 #: variance and the last step gained less too (fit.lm.LMOptions.negligible_gain): the remaining move is then
 #: within sqrt(0.1) = 0.32 standard errors in every direction, which moves a 95 % interval's coverage by about
 #: one point.
-NEGLIGIBLE_GAIN = 0.1
+NEGLIGIBLE_GAIN = rules.value("negligible_gain")
 #: ... or when its last 10 iterations together gained less than one unit (a descent held by a bound, the stability
 #: guard or the trust radius, which the unconstrained Gauss-Newton step does not see): at that pace forty more
 #: iterations would not reach the 3.84 units a test at the 5 % level needs. Units count the residual's effective
 #: samples (fit.effective): a residual that is mostly a missing effect holds far fewer than its length.
-NEGLIGIBLE_PACE = 1.0
-PACE_ITERATIONS = 10
+NEGLIGIBLE_PACE = rules.value("negligible_pace")
+PACE_ITERATIONS = rules.value("pace_iterations")
 #: With `substeps: auto` (N read from the modes at the chart's init, compiler.substeps) a fit whose network's own
 #: step error against the continuous chart exceeds the floor warning's share of the residual (identify.floor.
 #: FLOOR_WARN) is refitted from its values at 4x N (up to the cap): the learned friction the data gave the chart is
@@ -96,13 +98,13 @@ PACE_ITERATIONS = 10
 #: for a friction slope s) that keeps more than this share of its amplitude a step: the continuous chart's mode
 #: decays without alternating, so that mode is the explicit step's, and the curve's slope is held near the step's
 #: limit 2J/h (the guard's chatter radius 1) by the scheme rather than by the data.
-HELD_CHATTER = 0.5
+HELD_CHATTER = rules.value("held_chatter")
 #: An offline fit whose training residual RMS exceeds this many times the noise read off the records' second
 #: differences says so (a missing effect or a local minimum; issue 14): the benches' complete charts end within
 #: 4x the noise even at the paper's one step per sample, the cut diagnose's second look uses too (5x). The
 #: three-mass learned chart's 30 s draw 3 ended "converged" at 18 000x the minimum's cost before identify's own
 #: second look moved it (docs/rough_init.md).
-FAR_ABOVE_NOISE = 5.0
+FAR_ABOVE_NOISE = rules.value("far_above_noise")
 #: identify's (and batch's) multiple shooting by default: "auto" (identify.shootauto) is off wherever a free run of
 #: the chart at its `init` forgets a moved start. The whole test suite with auto as the default, first run: 580
 #: fits, a length chosen in 64 (62 fuzz charts of 39 samples whose start diverges within a sample, the start
@@ -186,12 +188,12 @@ class IdentifySettings:
 
     starts: int = 1
     seed: int = 0
-    max_iter: int = 1000
+    max_iter: int = rules.value("fit_max_iter")
     alignment: str = "zoh"
     split: float | None = None
     online: bool = False
-    window: int = 25000
-    average: int = 25000
+    window: int = rules.value("online_window")
+    average: int = rules.value("online_average")
     every: int = 1
     online_start: int = 0
     fixed_from: tuple[str, ...] = ()

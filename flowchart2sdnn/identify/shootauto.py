@@ -43,6 +43,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .. import rules
 from .initstate import state_neurons
 from .problem import Problem
 from .shooting import GROWTH, MAX_SEGMENTS, NOISE_MARGIN, noise_cost, stage_lengths
@@ -51,16 +52,16 @@ __all__ = ["ShootingChoice", "choose_shooting", "amplification", "GROWTH_BOUND",
            "second_look", "chaotic_at"]
 
 #: A start's error grown this many times (in units of each state's RMS) ends the predictable horizon.
-GROWTH_BOUND = 1000.0
+GROWTH_BOUND = rules.value("growth_bound")
 #: The first stage is this many times shorter than one Lyapunov time of the chart at its `init` (two merges,
 #: GROWTH ** 2): the rough chart's growth is not the truth's (module docstring), and the merging stages find the
 #: predictable length from the data (identify.shooting's refusal rule).
-SHORTER = GROWTH ** 2
+SHORTER = GROWTH * GROWTH
 #: auto's second look (:func:`second_look`) is for charts whose probe grew a moved start more than this: beyond
 #: the stable charts' 95th percentile (3.9 over the test suite's fits; module docstring).
-SUSPECT_PEAK = 4.0
+SUSPECT_PEAK = rules.value("suspect_peak")
 #: The moved start: this many times the state's RMS (small enough to stay linear up to GROWTH_BOUND).
-DELTA = 1e-7
+DELTA = rules.value("probe_delta")
 
 
 @dataclass(frozen=True)

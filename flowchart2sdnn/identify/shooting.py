@@ -59,6 +59,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import sparse
 
+from .. import rules
 from ..errors import SdnnError
 from ..fit.lm import LMOptions, LMResult, WideFirstCSR, levenberg_marquardt
 from .initstate import state_neurons
@@ -69,27 +70,27 @@ __all__ = ["Segmented", "shooting_fit", "stage_lengths", "kept_stage", "MAX_SEGM
            "noise_cost"]
 
 #: Segments of one stage at most: the Jacobian has (free states x segments) extra dense columns.
-MAX_SEGMENTS = 256
+MAX_SEGMENTS = rules.value("max_segments")
 #: Segment length factor from one stage to the next (boundaries of a stage are boundaries of the one before,
 #: so its free starts carry over).
-GROWTH = 4
+GROWTH = rules.value("segment_growth")
 #: Continuity weight factor from one stage to the next.
-WEIGHT_GROWTH = 10.0
+WEIGHT_GROWTH = rules.value("weight_growth")
 #: The Jacobian is handed to the trainer dense when a row's nonzeros (theta's and one start's) are at least
 #: this fraction of its columns (benchmarks/bench_shooting_iteration.py).
-DENSE_FRACTION = 0.25
+DENSE_FRACTION = rules.value("dense_fraction")
 #: LM iterations of a multiple-shooting stage at most (and max_iter): a stage only warms the next one up, and on
 #: the Coulomb bench a stage of 2 segments crawled 604 iterations for a 0.01 % lower cost.
-STAGE_MAX_ITER = 100
+STAGE_MAX_ITER = rules.value("stage_max_iter")
 #: A segment whose outputs' mean squared error exceeds this many times the stage's median segment's (its RMS
 #: twice the median's) has its free start reseated from the segment before (:func:`reseat`) ...
-RESEAT_RATIO = 4.0
+RESEAT_RATIO = rules.value("reseat_ratio")
 #: ... and the stage refitted, at most this many times (while that lowers its cost).
-RESEAT_ROUNDS = 3
+RESEAT_ROUNDS = rules.value("reseat_rounds")
 #: A merge is refused when it raises the output cost per sample more than this (RMS +20 %; module docstring) ...
-MERGE_RISE = 1.44
+MERGE_RISE = rules.value("merge_rise")
 #: ... from a stage whose residual RMS is at most this many times the noise estimate (module docstring).
-NOISE_MARGIN = 2.0
+NOISE_MARGIN = rules.value("noise_margin")
 
 
 def stage_lengths(length: int, longest: int) -> list[int]:
@@ -536,9 +537,9 @@ def _dense(a) -> np.ndarray:
 
 
 #: higher difference orders the noise is read from besides the second (see noise_variance)
-NOISE_ORDERS = (3, 4, 6, 8)
+NOISE_ORDERS = rules.value("noise_orders")
 #: frequency bands of the spectral reading (see noise_variance)
-NOISE_BANDS = 16
+NOISE_BANDS = rules.value("noise_bands")
 
 
 def noise_variance(y: np.ndarray) -> np.ndarray:

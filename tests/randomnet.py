@@ -1,4 +1,4 @@
-"""Plain (unstructured) GDNNs as :class:`Network` files, and a small helper to build networks by hand.
+"""Test fixtures: plain (unstructured) GDNNs as :class:`Network` files, and a helper to build networks by hand.
 
 :func:`random_gdnn` follows the layout of pyrenn's ``CreateNN(nn, dIn, dIntern, dOut)``: inputs (with
 ``input_delays``) feed layer 0; layer m feeds layer m + 1 without delay; every layer m receives recurrent
@@ -18,7 +18,7 @@ from collections.abc import Iterable, Mapping, Sequence
 
 import numpy as np
 
-from .model import (
+from flowchart2sdnn.network.model import (
     FreeWeightSpec,
     InitialState,
     InputSpec,
