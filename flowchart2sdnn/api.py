@@ -296,16 +296,18 @@ def _not_a_record(item, what: str) -> Diagnostic:
 def with_data_notes(ident: Identification, records: Sequence[Dataset]) -> Identification:
     """`ident` with the records' data notes (time base, delimiter) before its own warnings, and after them the
     warning of a residual that follows a held input at lag 0 (identify.lagzero)."""
-    from .data.timebase import record_notes
+    from .data.timebase import record_notices
     from .identify.lagzero import lag_zero_warnings
+    from .notices import messages
 
-    notes = record_notes(records)
+    notes = record_notices(records)
     # the fit's own point: with per-record quantities ident.x holds their mean, the optimizer's result all of them
     point = getattr(ident.lm, "x", None) if ident.lm is not None else ident.x
     lag = lag_zero_warnings(ident.problem, point) if ident.problem is not None and point is not None else []
     if not notes and not lag:
         return ident
-    return replace(ident, warnings=tuple(notes) + tuple(ident.warnings) + tuple(lag))
+    notices = (*notes, *ident.notices, *lag)
+    return replace(ident, warnings=messages(notices), notices=notices)
 
 
 def _chart(chart: Diagram | str | Path) -> Diagram:
