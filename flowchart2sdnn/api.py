@@ -221,7 +221,8 @@ def diagnose(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset],
 
     The records' time columns are checked and prepared as for :func:`identify` (their notes in ``data_notes``).
     """
-    from .data.timebase import conform, record_notes
+    from .data.timebase import conform, record_notices
+    from .notices import messages
 
     diagram = _chart(chart)
     records = _records(diagram, data, "data")
@@ -235,8 +236,8 @@ def diagnose(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset],
         names = effects.split(",") if isinstance(effects, str) else list(effects)  # "friction,damping" as --effects
         library = select_effects(names, effect_library(), "effects")
     out = _diagnose(diagram, train, tuple(val), DiagnoseSettings(**settings), library)
-    notes = record_notes([*train, *val])
-    return replace(out, data_notes=tuple(notes)) if notes else out
+    notes = record_notices([*train, *val])
+    return replace(out, data_notes=messages(notes), data_notices=tuple(notes)) if notes else out
 
 
 def prepared(diagram: Diagram, data: Dataset | Sequence[Dataset], validation: Dataset | None,

@@ -94,15 +94,18 @@ def messages(notices: Iterable[Notice]) -> tuple[str, ...]:
     return tuple(n.message for n in notices)
 
 
-def aligned(warnings: Iterable[str], notices: Iterable[Notice]) -> tuple[Notice, ...]:
-    """A notice per warning, in the warnings' order: the one of `notices` with that message, else an uncoded
-    one. The sentences stay the source of truth, so code that edits ``warnings`` alone keeps the two in step."""
+def aligned(warnings: Iterable[str | Notice], notices: Iterable[Notice]) -> tuple[Notice, ...]:
+    """A notice per warning, in the warnings' order: the warning itself when it is a Notice, else the one of
+    `notices` with that message, else an uncoded one. The sentences stay the source of truth, so code that edits
+    ``warnings`` alone keeps the two in step."""
     by_message = {n.message: n for n in notices}
-    return tuple(by_message.get(str(w)) or Notice(None, str(w)) for w in warnings)
+    return tuple(w if isinstance(w, Notice) else by_message.get(str(w)) or Notice(None, str(w)) for w in warnings)
 
 
 def _finite(v):
-    """`v` with every non-finite float inside it (dicts, lists) as None."""
+    """`v` as plain JSON: numpy scalars as Python numbers, every non-finite float inside it (dicts, lists) as None."""
+    if type(v).__module__ == "numpy" and hasattr(v, "item"):  # np.int64 is no int to json
+        v = v.item()
     if isinstance(v, float):
         return v if math.isfinite(v) else None
     if isinstance(v, Mapping):

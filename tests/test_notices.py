@@ -11,6 +11,7 @@ import math
 import re
 from pathlib import Path
 
+import numpy as np
 import pytest
 
 import flowchart2sdnn as sd
@@ -53,9 +54,11 @@ def test_the_docs_table_lists_every_code_once():
 def test_a_record_refuses_an_unknown_code_and_stores_strict_json():
     with pytest.raises(ValueError, match="unknown notice code"):
         Notice("NOPE001", "x")
-    n = Notice("FLOOR001", "m", {"outputs": {"w1": {"share": math.inf, "floor": 0.5}}, "ratio": math.nan})
+    n = Notice("FLOOR001", "m", {"outputs": {"w1": {"share": math.inf, "floor": 0.5}}, "ratio": math.nan,
+                                 "substeps": np.int64(4), "rows": [np.float32(-np.inf)]})
     d = n.to_dict()
-    assert d["numbers"] == {"outputs": {"w1": {"share": None, "floor": 0.5}}, "ratio": None}
+    assert d["numbers"] == {"outputs": {"w1": {"share": None, "floor": 0.5}}, "ratio": None, "substeps": 4,
+                            "rows": [None]}
     json.dumps(d, allow_nan=False)
     assert n.one_line() == "warning[FLOOR001] m" and Notice(None, "m").one_line("note") == "note: m"
     finite = Notice("IDENT002", "a and b", {"parameters": ["a", "b"], "correlation": -0.9999}, "fix one")
@@ -100,6 +103,9 @@ def test_editing_the_warnings_alone_keeps_a_record_per_warning(on_bound):
     fewer = dataclasses.replace(on_bound, warnings=on_bound.warnings[1:] + ("a note of the caller",))
     assert [n.message for n in fewer.notices] == list(fewer.warnings)
     assert fewer.notices[:-1] == on_bound.notices[1:] and fewer.notices[-1].code is None
+    # records given as the warnings: kept, their sentences the warnings
+    given = dataclasses.replace(on_bound, warnings=on_bound.notices[::-1], notices=())
+    assert given.notices == on_bound.notices[::-1] and given.warnings == on_bound.warnings[::-1]
 
 
 def test_the_summary_prints_each_warning_with_its_code(on_bound):

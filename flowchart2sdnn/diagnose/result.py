@@ -250,8 +250,8 @@ class Diagnosis:
 
     def __post_init__(self) -> None:
         # the sentences lead, as in Identification: a note given alone gets an uncoded record
-        object.__setattr__(self, "data_notes", tuple(str(n) for n in self.data_notes))
         object.__setattr__(self, "data_notices", aligned(self.data_notes, self.data_notices))
+        object.__setattr__(self, "data_notes", tuple(str(n) for n in self.data_notes))
 
     def __repr__(self) -> str:
         return view("diagnosis_line")(self)

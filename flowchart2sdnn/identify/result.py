@@ -244,8 +244,8 @@ class Identification:
 
     def __post_init__(self) -> None:
         # the sentences lead: code that replaces `warnings` alone keeps a record per sentence
-        object.__setattr__(self, "warnings", tuple(str(w) for w in self.warnings))
         object.__setattr__(self, "notices", aligned(self.warnings, self.notices))
+        object.__setattr__(self, "warnings", tuple(str(w) for w in self.warnings))
         if not isinstance(self.extra, Extra):
             object.__setattr__(self, "extra", Extra.of(self.extra))
 

@@ -209,7 +209,7 @@ BEST_HEAD = ["round", "rank", "candidate", "score", "p", "val RMS refitted"]
 
 def _warnings(d: Diagnosis) -> tuple[str, ...]:
     # the final fit's own warnings are listed with its parameters
-    return tuple(w for w in d.warnings if w not in d.identification.warnings)
+    return tuple(coded(n) for n in d.notices if n.message not in d.identification.warnings)
 
 
 def diagnosis_text(d: Diagnosis) -> str:
