@@ -50,6 +50,7 @@ __all__ = [
     "DiagnoseSettings",
     "Diagnosis",
     "SdnnError",
+    "Notice",
 ]
 
 _HOME = {
@@ -59,6 +60,7 @@ _HOME = {
     "IdentifySettings": "identify.settings", "Identification": "identify.result", "Estimate": "identify.result",
     "Curve": "identify.result", "Metrics": "identify.result",
     "DiagnoseSettings": "diagnose.loop", "Diagnosis": "diagnose.result", "SdnnError": "errors",
+    "Notice": "notices",
 }
 
 

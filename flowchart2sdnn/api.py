@@ -221,7 +221,8 @@ def diagnose(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset],
 
     The records' time columns are checked and prepared as for :func:`identify` (their notes in ``data_notes``).
     """
-    from .data.timebase import conform, record_notes
+    from .data.timebase import conform, record_notices
+    from .notices import messages
 
     diagram = _chart(chart)
     records = _records(diagram, data, "data")
@@ -235,8 +236,8 @@ def diagnose(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset],
         names = effects.split(",") if isinstance(effects, str) else list(effects)  # "friction,damping" as --effects
         library = select_effects(names, effect_library(), "effects")
     out = _diagnose(diagram, train, tuple(val), DiagnoseSettings(**settings), library)
-    notes = record_notes([*train, *val])
-    return replace(out, data_notes=tuple(notes)) if notes else out
+    notes = record_notices([*train, *val])
+    return replace(out, data_notes=messages(notes), data_notices=tuple(notes)) if notes else out
 
 
 def prepared(diagram: Diagram, data: Dataset | Sequence[Dataset], validation: Dataset | None,
@@ -296,16 +297,18 @@ def _not_a_record(item, what: str) -> Diagnostic:
 def with_data_notes(ident: Identification, records: Sequence[Dataset]) -> Identification:
     """`ident` with the records' data notes (time base, delimiter) before its own warnings, and after them the
     warning of a residual that follows a held input at lag 0 (identify.lagzero)."""
-    from .data.timebase import record_notes
+    from .data.timebase import record_notices
     from .identify.lagzero import lag_zero_warnings
+    from .notices import messages
 
-    notes = record_notes(records)
+    notes = record_notices(records)
     # the fit's own point: with per-record quantities ident.x holds their mean, the optimizer's result all of them
     point = getattr(ident.lm, "x", None) if ident.lm is not None else ident.x
     lag = lag_zero_warnings(ident.problem, point) if ident.problem is not None and point is not None else []
     if not notes and not lag:
         return ident
-    return replace(ident, warnings=tuple(notes) + tuple(ident.warnings) + tuple(lag))
+    notices = (*notes, *ident.notices, *lag)
+    return replace(ident, warnings=messages(notices), notices=notices)
 
 
 def _chart(chart: Diagram | str | Path) -> Diagram:

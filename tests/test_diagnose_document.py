@@ -7,6 +7,7 @@ chart that lacks the friction (tests/data/diagnose); one round, two effects, so 
 
 from __future__ import annotations
 
+import dataclasses
 import json
 import re
 from pathlib import Path
@@ -22,6 +23,7 @@ from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
 from flowchart2sdnn.diagnose.result import Diagnosis
 from flowchart2sdnn.errors import SdnnError
+from flowchart2sdnn.notices import Notice
 
 GUIDE = Path(__file__).resolve().parents[1] / "docs" / "guide" / "diagnose.md"
 EXCITATION = {"amplitude": (-6.0, 6.0), "relay_level": 3.0, "relay_switch": 1.0, "relay_band": 0.2}
@@ -79,7 +81,8 @@ def test_the_document_has_the_keys_the_guide_documents(traced):
            "n_accepted", "first_fit", "settings", "timing"}
     assert all(f"`{k}`" in section for k in top)
     # beside them: the format tag, the interrupted flag (the `interrupted` stop), the notes and the command line
-    assert top <= set(doc) and set(doc) - top <= {"format", "version", "interrupted", "data_notes", "command"}
+    assert top <= set(doc) and set(doc) - top <= {"format", "version", "interrupted", "data_notes",
+                                                      "data_notices", "command"}
     assert set(doc["first_fit"]) == _braced(section, "first_fit")
     assert all(set(a) == _braced(section, "accepted") for a in doc["accepted"])
     rounds = {k.split("/")[0] for k in _braced(section, "rounds")} | {"after"}
@@ -91,6 +94,18 @@ def test_a_document_reads_back_unchanged(traced):
     again = from_document(doc)
     assert json.loads(dumps(to_document(again))) == doc
     assert list(to_document(again)) == list(doc)  # the keys in the order they were written
+
+
+def test_the_data_notes_read_back_as_records_with_their_codes(traced):
+    note = Notice("READ001", "train.csv: delimiter ';' (detected from the header; --delimiter to set it)",
+                  {"delimiter": ";"}, "--delimiter to set it")
+    noted = dataclasses.replace(traced, data_notes=(note.message,), data_notices=(note,))
+    doc = json.loads(noted.to_json())
+    assert doc["data_notes"] == [note.message] and doc["data_notices"] == [note.to_dict()]
+    again = from_document(doc)
+    assert again.data_notices == (note,) and again.notices[0] == note
+    assert again.warnings == tuple(n.message for n in again.notices)
+    assert again.notices[1:] == again.identification.notices  # a traced run: nothing of its own to say
 
 
 def test_the_command_line_writes_the_document_and_it_reads_back(records, tmp_path):

@@ -8,7 +8,6 @@ from __future__ import annotations
 
 import dataclasses
 import json
-import re
 from pathlib import Path
 
 import numpy as np
@@ -16,6 +15,7 @@ import pandas as pd
 import pytest
 
 import flowchart2sdnn as sd
+from flowchart2sdnn.compiler.substeps import AUTO_CAP
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.identify.document import from_document
 from flowchart2sdnn.identify.floor import FLOOR_WARN
@@ -54,7 +54,7 @@ def _oracle_floor(result, ds, alignment="zoh"):
 
 
 def _floor_warnings(result):
-    return [w for w in result.warnings if "discretization floor" in w]
+    return [n for n in result.notices if n.code == "FLOOR001"]
 
 
 def test_floor_at_one_step_warns_and_auto_does_not(bench):
@@ -69,7 +69,13 @@ def test_floor_at_one_step_warns_and_auto_does_not(bench):
     floor, rms = paper.extra["discretization"]["floor"]["rms"], paper.fit.train.rms
     assert max(floor[n] / rms[n] for n in rms) > FLOOR_WARN
     (warning,) = _floor_warnings(paper)
-    assert re.search(r"`substeps: (\d+)`", warning) and "delays: torques" in warning
+    n = warning.numbers["suggested_substeps"]
+    assert n > 1 and f"`substeps: {n}`" in warning.message and "delays: torques" in warning.message
+    # the outputs it names are those over the line, each at the share the result's own floor and RMS give
+    over = {k for k in rms if floor[k] > FLOOR_WARN * rms[k]}
+    assert set(warning.numbers["outputs"]) == over
+    for k in over:
+        assert warning.numbers["outputs"][k]["share"] == pytest.approx(floor[k] / rms[k])
     floor, rms = fine.extra["discretization"]["floor"]["rms"], fine.fit.train.rms
     assert max(floor[n] / rms[n] for n in rms) < FLOOR_WARN
     assert not _floor_warnings(fine)
@@ -161,10 +167,10 @@ def test_the_advised_substeps_remove_the_warning_on_the_bundled_example():
     root = Path(__file__).resolve().parent.parent
     chart, data = sd.load_chart(root / "diagrams/engine.yaml"), sd.read_csv(root / "examples/data/engine_idle.csv")
     first = sd.identify(dataclasses.replace(chart, substeps=1), data)
-    (warning,) = [w for w in first.warnings if w.startswith("the discretization floor")]
-    n = int(re.search(r"`substeps: (\d+)`", warning).group(1))
+    (warning,) = _floor_warnings(first)
+    n = warning.numbers["suggested_substeps"]
     again = sd.identify(dataclasses.replace(chart, substeps=n), data)
-    assert not [w for w in again.warnings if w.startswith("the discretization floor")]
+    assert not _floor_warnings(again)
     assert again.to_document()["discretization"]["floor"]["rms"]["w1"] < first.to_document()["discretization"]["floor"]["rms"]["w1"] / (n / 2)
 
 
@@ -178,7 +184,10 @@ def test_auto_substeps_refit_finer_when_the_fitted_curve_outgrows_them():
     doc = out.to_document()
     refit = doc["substeps_refit"]
     assert refit["substeps"] < doc["discretization"]["substeps"] and doc["discretization"]["requested"] is None
-    assert any(w.startswith("substeps auto: N = ") for w in out.warnings)
-    assert not [w for w in out.warnings if w.startswith("the discretization floor")]
+    note = next(n for n in out.notices if n.code == "FLOOR002")  # the first refit's (a second one adds its own)
+    assert note.numbers["substeps"] == refit["substeps"]
+    assert note.numbers["refitted_at"] == min(AUTO_CAP, 4 * refit["substeps"])
+    assert note.numbers["refitted_at"] == doc["discretization"]["substeps"] or "then" in refit
+    assert not _floor_warnings(out)
     assert doc["discretization"]["floor"]["rms"]["w1"] < FLOOR_WARN * doc["fit"]["train"]["rms"]["w1"]
     assert out.parameters["J1"].init == chart.parameter("J1").init  # the user's start, not the first fit's

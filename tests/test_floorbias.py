@@ -20,6 +20,7 @@ import flowchart2sdnn as sd
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.identify.document import from_document
+from flowchart2sdnn.identify.floorbias import BIAS_WARN
 from flowchart2sdnn.identify.run import with_floor_bias
 from flowchart2sdnn.report.identify_text import format_result
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
@@ -72,8 +73,14 @@ def test_bias_widens_the_interval_and_is_reported(noisy):
         assert lo == pytest.approx(nlo - abs(b)) and hi == pytest.approx(nhi + abs(b))
         assert bias["corrected"][name]["value"] == pytest.approx(p["value"] - b)
         assert bias["ratio"][name] == pytest.approx(abs(b) / p["stderr"])
-    (warning,) = [w for w in fit.warnings if "reflect the noise only" in w]
-    assert "c by" in warning
+    (warning,) = [n for n in fit.notices if n.code == "FLOOR004"]
+    assert "c by" in warning.message
+    # it names exactly the parameters RESULT.json's bias puts past half a standard error, with their numbers
+    over = {n for n, r in bias["ratio"].items() if r is not None and r > BIAS_WARN}
+    assert set(warning.numbers["shifted"]) == over and "c" in over
+    for name in over:
+        assert warning.numbers["shifted"][name]["beta"] == pytest.approx(bias["beta"][name])
+        assert warning.numbers["shifted"][name]["standard_errors"] == pytest.approx(bias["ratio"][name])
     assert from_document(doc).to_document()["parameters"] == doc["parameters"]  # read back unchanged
     text = format_result(fit)
     assert "discretization bias" in text and "corrected 95 % interval" in text
@@ -100,7 +107,7 @@ def test_the_analysis_added_afterwards_is_identifys_own_at_the_same_point(noisy)
         assert est.ci95_noise == plain.parameters[name].ci95
         assert est.ci95 == pytest.approx(default.parameters[name].ci95, rel=1e-9)
         assert est.ci95[1] - est.ci95[0] == pytest.approx(est.ci95_noise[1] - est.ci95_noise[0] + 2 * abs(beta[name]))
-    assert [w for w in added.warnings if "reflect the noise only" in w]
+    assert [n for n in added.notices if n.code == "FLOOR004"]
     assert added.settings.floor_bias and with_floor_bias(added, [noisy]) is added  # done once
 
 
@@ -147,10 +154,12 @@ def test_an_unconverged_refit_continues_and_warns_only_while_beta_moves(clean, m
     chart = dataclasses.replace(PLANT, substeps=1, delays="torques")
     settled = sd.identify(chart, clean, max_iter=50)
     assert settled.extra["discretization"]["bias"]["refit"]["beta_change"] is None
-    assert not any("did not converge" in w for w in settled.warnings)
+    assert not any(n.code == "FLOOR003" for n in settled.notices)
     monkeypatch.setattr(floorbias, "BIAS_ITER", 1)
     fit = sd.identify(chart, clean, max_iter=50)
     refit = fit.extra["discretization"]["bias"]["refit"]
     assert refit["status"] == "max_iter" and refit["iterations"] == 2
     assert refit["beta_change"] > floorbias.BETA_SETTLED
-    assert any("did not converge in 2 iterations" in w for w in fit.warnings)
+    (warning,) = [n for n in fit.notices if n.code == "FLOOR003"]
+    assert warning.numbers == {"iterations": 2, "beta_change": refit["beta_change"]}
+    assert "did not converge in 2 iterations" in warning.message

@@ -158,6 +158,8 @@ def test_start_on_the_lower_bound_still_recovers_J1(data, tmp_path):
     outcome, r = _fit(chart, data / "engine.csv")
     assert abs(r["parameters"]["J1"]["value"] - J1_TRUE) / J1_TRUE < 0.02
     assert any("J1 starts on its lower bound" in w for w in r["warnings"])
+    assert {"code": "START002", "parameter": "J1", "side": "lower", "value": 0.05} in [
+        {"code": n["code"], **n["numbers"]} for n in r["notices"]]
 
 
 def test_start_on_the_upper_bound_is_warned_about_and_stays_within_bounds(data, tmp_path):
@@ -187,6 +189,7 @@ def test_parameters_that_only_appear_as_a_product_are_reported_not_crashed_on(da
     assert abs(ja["value"] * jb["value"] - J1_TRUE) / J1_TRUE < 0.02  # the product is identified
     assert ja["stderr"] is None and jb["stderr"] is None and ja["ci95"] is None  # the factors are not
     assert any("Ja" in w and "Jb" in w and "told apart" in w for w in r["warnings"])
+    assert any(n["code"] == "IDENT001" and set(n["numbers"]["parameters"]) == {"Ja", "Jb"} for n in r["notices"])
     assert r["uncertainty"]["condition_number"] is None or r["uncertainty"]["condition_number"] > 1e8
 
 

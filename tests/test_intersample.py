@@ -156,8 +156,9 @@ def test_linear_intersample_recovers_the_smooth_oscillator_and_hold_is_biased_an
     hold = sd.identify(str(tmp_path / "hold.yaml"), data)
     assert max(abs(hold.parameters[n].value / so.TRUE[n] - 1) for n in ("k", "d", "k3")) > 0.05
     assert hold.fit.train.rms["x"] > 10 * sigma
-    warning = next(w for w in hold.warnings if "lag 0" in w)
-    assert "intersample: linear" in warning and "--intersample u=linear" in warning
+    warning = next(n for n in hold.notices if n.code == "LAG001")
+    assert "intersample: linear" in warning.message and "--intersample u=linear" in warning.message
+    assert warning.numbers["input"] == "u" and abs(warning.numbers["r"]) > warning.numbers["chance"]
 
 
 @pytest.mark.parametrize("samples", [0.3, 1.5, 4.7])

@@ -358,9 +358,11 @@ def test_identify_says_when_a_sqrt_argument_went_negative_and_never_returns_nan(
     result = sd.identify(diagram_from_text(text), data, max_iter=50)
     assert result.parameters["c"].value == pytest.approx(2.0, rel=1e-3)
     assert all(math.isfinite(v) for v in result.fit.train.rms.values())
-    (warning,) = [w for w in result.warnings if "sqrt 'r'" in w]
+    (warning,) = [n for n in result.notices if n.code == "SQRT001" and n.numbers["block"] == "r"]
     # the network sees u(0) .. u(Q-2) on the Q-1 fitted rows (zoh)
-    assert f"negative on {int(np.sum(u[:-1] < 0))} of 299 samples" in warning and "-sqrt(-z)" in warning
+    negative = int(np.sum(u[:-1] < 0))
+    assert warning.numbers["negative"] == negative and warning.numbers["samples"] == 299
+    assert f"negative on {negative} of 299 samples" in warning.message and "-sqrt(-z)" in warning.message
 
 
 def test_cli_lint_explain_and_excite_know_the_new_blocks(tmp_path):

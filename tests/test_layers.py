@@ -14,7 +14,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "flowchart2sdnn"
 
 #: bottom -> top; a module may import its own package and anything of a lower rank, nothing else of ours.
 RANKS = {
-    "_version": 0, "errors": 0, "tables": 0, "strictjson": 0,
+    "_version": 0, "errors": 0, "notices": 0, "tables": 0, "strictjson": 0,
     "rules": 0,  # the rule book: every threshold's one default (imports nothing)
     "views": 0,  # the registry report/ fills for results that draw on request (Identification.compare(plot=))
     "atomic": 1, "expr": 1, "executors": 1,

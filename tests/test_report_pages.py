@@ -117,6 +117,12 @@ class _Dom(HTMLParser):
                 part.append(data)
 
 
+def _said(printed: list[str], kind: str) -> list[str]:
+    """The messages of the lines the command printed as `kind` ("warning: ..." or, with a code, "warning[CODE] ...")."""
+    said = (re.match(rf"\s*{kind}(?:: |\[[A-Z]+[0-9]+\] )(.*)", line) for line in printed)
+    return [m.group(1) for m in said if m]
+
+
 def _fit_table(dom: _Dom) -> list[list[str]]:
     return next(t for t in dom.tables if t and t[0][:5] == ["record", "output", "cost E", "RMS", "fit %"])
 
@@ -156,7 +162,7 @@ def test_each_records_figure_shows_the_fit_of_its_table_row(records, monkeypatch
 
 def test_the_page_shows_every_warning_the_identify_command_printed(records, monkeypatch):
     page, args, printed = _identify(records, monkeypatch, "--max-iter", "2", "--lags", "40")
-    warnings = [line.split("warning: ", 1)[1] for line in printed if "warning: " in line]
+    warnings = _said(printed, "warning")
     assert any(w.startswith("not converged") for w in warnings)  # the test sees warnings, or it proves nothing
     _, text = read_page(page)
     for w in warnings:
@@ -180,9 +186,8 @@ def test_the_page_shows_every_warning_and_note_the_diagnose_command_printed(tmp_
             "--allow-unconverged", "--init-window", "100", "--html", str(tmp_path / "d.html")]
     code, printed = _run(args, monkeypatch)
     assert code == 0, "\n".join(printed)
-    said = [line.split(f"{kind}: ", 1)[1] for line in printed for kind in ("warning", "note")
-            if line.lstrip().startswith(f"{kind}: ")]
-    assert any(w.startswith("warning: ") for w in printed) and any("delimiter ';'" in w for w in said), printed
+    said = _said(printed, "warning") + _said(printed, "note")
+    assert _said(printed, "warning") and any("delimiter ';'" in w for w in said), printed
     _, text = read_page(tmp_path / "d.html")
     for w in said:
         assert " ".join(w.split()) in text, w

@@ -111,6 +111,8 @@ def test_a_chaotic_record_keeps_a_segmented_stage_and_says_so():
     assert shooting["stages"][0].get("kept") and all(s.get("refused") for s in shooting["stages"][1:])
     assert [s["length"] for s in shooting["stages"]] == [25, 100, 400, data.n_rows - 1]
     assert any("does not follow the whole records" in w for w in res.warnings)
+    (said,) = [n for n in res.notices if n.code == "SHOOT001"]
+    assert said.numbers["final_length"] == res.extra["shooting"]["final_length"]
     # the parameters come from the segmented stage, and it found the pendulum
     assert res.parameters["b"].value == pytest.approx(0.5, rel=0.02)
     assert res.parameters["k"].value == pytest.approx(1.0, rel=0.02)

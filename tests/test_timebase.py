@@ -102,10 +102,11 @@ def test_ms_hint_names_the_unit_and_resample(files):
 @pytest.mark.parametrize("case", ["jitter", "gap", "semicolon", "tab"])
 def test_prepared_files_load_with_a_note_and_give_the_clean_parameters(files, clean, case):
     ident = _api(files[case])
-    notes = [w for w in ident.warnings if w.startswith(str(files[case]))]
+    notes = [w for w in ident.notices if w.message.startswith(str(files[case]))]
     assert notes, ident.warnings
     word = {"jitter": "snapped", "gap": "split into 2 records", "semicolon": "decimal comma", "tab": "tab"}[case]
-    assert any(word in n for n in notes), notes
+    code = {"jitter": "TIME001", "gap": "TIME002", "semicolon": "READ002", "tab": "READ001"}[case]
+    assert any(word in n.message and n.code == code for n in notes), notes
     for name in TRUE:
         estimate = ident.parameters[name]
         ref = clean.parameters[name]
@@ -117,13 +118,16 @@ def test_prepared_files_load_with_a_note_and_give_the_clean_parameters(files, cl
     res = _cli(files[case])
     assert res.exit_code == 0, res.output
     for note in notes:
-        assert f"warning: {note}" in res.output
+        assert f"warning[{note.code}] {note.message}" in res.output
 
 
 def test_the_gap_is_two_records_of_the_rows_around_it(files):
     parts = conform(sd.read_csv(files["gap"]), 1e-3)
     assert [p.n_rows for p in parts] == [1500, N - 1541]
-    assert "41 after line 1501" in parts[0].notes[-1]
+    note = parts[0].notes[-1]
+    assert "41 after line 1501" in note.message and note.code == "TIME002"
+    # the rows of the file as written (41 samples left out after row 1499): the parts' rows, by number
+    assert note.numbers["gaps"] == 1 and note.numbers["records"] == [[0, 1499], [1500, N - 42]]
 
 
 def test_resample_puts_a_10ms_record_on_the_1ms_grid(files, tmp_path):
@@ -137,7 +141,7 @@ def test_resample_puts_a_10ms_record_on_the_1ms_grid(files, tmp_path):
     inner = slice(200, -200)  # the ends carry the filter's edge
     assert np.max(np.abs(part.columns["F"][inner] - truth[inner])) < 2e-3
     assert np.allclose(np.diff(fine), 1e-3)
-    assert "resampled from 0.01 s" in part.notes[-1]
+    assert "resampled from 0.01 s" in part.notes[-1].message and part.notes[-1].code == "TIME003"
 
 
 def test_resample_on_the_command_line_notes_and_fits(files):

@@ -137,13 +137,14 @@ def diagnose(paths, diagram, validation, split, output, report_path, rounds, eff
     """Trace the residual of CHART (YAML; never modified) on DATA (one or more CSV records) to missing effects,
     add them to the chart, refit, and report the error before and after."""
     from ..atomic import atomic_write_text, check_output_path
-    from ..data.timebase import record_notes
+    from ..data.timebase import record_notices
     from ..diagnose.document import dumps
     from ..diagnose.effects import effect_library, select_effects
     from ..diagnose.loop import DiagnoseSettings
     from ..diagnose.loop import diagnose as run_diagnose
     from ..diagram.dump import dump_diagram
     from ..diagram.validate import load_diagram
+    from ..notices import messages
     from ..report.diagnose_text import format_report
 
     chart, data = chart_and_data("diagnose", paths, diagram)
@@ -174,10 +175,10 @@ def diagnose(paths, diagram, validation, split, output, report_path, rounds, eff
     dialect = (delimiter, decimal, resample)
     train = read_records(data, diagram, maps, scales, *dialect)
     val = read_records(validation, diagram, maps, scales, *dialect, window=False)
-    notes = record_notes([*train, *val])
+    notes = record_notices([*train, *val])
     if not quiet:
         for note in notes:
-            click.echo(f"note: {note}", err=True)
+            click.echo(note.one_line("note"), err=True)
     with settings_usage():
         settings = DiagnoseSettings(rounds=rounds, top=top, second_look=second_look, refit_iter=refit_iter, max_iter=max_iter,
                                     alpha=alpha, criterion=criterion, min_gain=min_gain, spread_z=spread_z,
@@ -203,7 +204,7 @@ def diagnose(paths, diagram, validation, split, output, report_path, rounds, eff
     if executor is not None:
         # after Ctrl-C the refits still running are dropped, not waited for
         executor.close(cancel=outcome.interrupted)
-    outcome = replace(outcome, data_notes=tuple(notes),
+    outcome = replace(outcome, data_notes=messages(notes), data_notices=tuple(notes),
                       command={"data": list(data), "diagram": chart, "validate": list(validation),
                                "effects_file": effects_file, "output": output, "map": dict(maps)})
     report = outcome.report

@@ -75,6 +75,7 @@ import numpy as np
 from flowchart2sdnn.atomic import atomic_open
 from flowchart2sdnn.errors import SdnnError, did_you_mean
 from flowchart2sdnn.expr import ExprError
+from flowchart2sdnn.notices import Notice
 
 from .columns import EXAMPLE, column_scale
 
@@ -111,7 +112,7 @@ class Dataset:
     scales : dict of str to float
         Requested name (or ``"time"``) -> the factor its column was multiplied by (a column expression of the
         mapping times a ``scale``); names read as logged are absent.
-    notes : tuple of str
+    notes : tuple of Notice
         What was done to the data on the way in (a detected delimiter, snapped timestamps, a split at a gap,
         a resampling): each one line, shown with the run's output (see :mod:`.timebase`).
     time_column : str or None
@@ -132,7 +133,7 @@ class Dataset:
     sha256: str
     source_columns: dict[str, str]
     scales: dict[str, float] = dataclasses.field(default_factory=dict)
-    notes: tuple[str, ...] = ()
+    notes: tuple[Notice, ...] = ()
     time_column: str | None = None
     lines: tuple[tuple[int, ...], tuple[int, ...]] | None = None
     row0: int = 0
@@ -694,7 +695,7 @@ _DELIMITERS = {",": "','", ";": "';'", "\t": "tab", "|": "'|'"}
 _COMMA_NUMBER = re.compile(r"^\s*[-+]?\d*,\d+([eE][-+]?\d+)?\s*$")
 
 
-def sniff_dialect(file: str, delimiter: str, decimal: str) -> tuple[str, str, list[str]]:
+def sniff_dialect(file: str, delimiter: str, decimal: str) -> tuple[str, str, list[Notice]]:
     """The delimiter and decimal mark to read `file` with, detected where "auto", and the notes saying so."""
     if delimiter != "auto" and delimiter not in _DELIMITERS:
         raise ValueError(f"delimiter must be one of ',', ';', tab, '|' or 'auto', not {delimiter!r}")
@@ -710,12 +711,14 @@ def sniff_dialect(file: str, delimiter: str, decimal: str) -> tuple[str, str, li
         counts = {sep: len(next(csv.reader([head[0]], delimiter=sep), [])) for sep in _DELIMITERS} if head else {}
         delimiter = max(counts, key=lambda sep: (counts[sep], sep == ","), default=",")
         if delimiter != ",":
-            notes.append(f"delimiter {_DELIMITERS[delimiter]} (detected from the header; --delimiter to set it)")
+            notes.append(Notice("READ001", f"delimiter {_DELIMITERS[delimiter]} (detected from the header; "
+                                "--delimiter to set it)", {"delimiter": delimiter}, "--delimiter to set it"))
     if decimal == "auto":
         cells = next(csv.reader([head[1]], delimiter=delimiter), []) if len(head) > 1 else []
         decimal = "," if delimiter != "," and any(_COMMA_NUMBER.match(c) for c in cells) else "."
         if decimal == ",":
-            notes.append("decimal comma (detected from the first data row; --decimal to set it)")
+            notes.append(Notice("READ002", "decimal comma (detected from the first data row; --decimal to set it)",
+                                {"decimal": ","}, "--decimal to set it"))
     return delimiter, decimal, notes
 
 

@@ -24,9 +24,10 @@ from fractions import Fraction
 import numpy as np
 
 from ..errors import SdnnError
+from ..notices import Notice, messages
 from .csvdata import Dataset
 
-__all__ = ["STEP_TOLERANCE", "SNAP", "MIN_PART", "conform", "longest", "record_notes"]
+__all__ = ["STEP_TOLERANCE", "SNAP", "MIN_PART", "conform", "longest", "record_notes", "record_notices"]
 
 #: the median step may differ this much (relative) from the sample time; a step this far off is a note
 STEP_TOLERANCE = 0.01
@@ -77,8 +78,10 @@ def conform(data: Dataset, sample_time: float, resample: bool = False) -> list[D
     notes = list(data.notes)
     grid = t0 + slope * index
     if np.max(np.abs(np.diff(off))) > STEP_TOLERANCE:  # a step off by more than the strict check allowed
-        notes.append(f"{column}: timestamps up to {abs(off[worst]) * slope:.3g} s ({100 * abs(off[worst]):.3g} % of "
-                     f"a step) off the grid of {slope:.6g} s steps: snapped to it")
+        notes.append(Notice("TIME001", f"{column}: timestamps up to {abs(off[worst]) * slope:.3g} s "
+                            f"({100 * abs(off[worst]):.3g} % of a step) off the grid of {slope:.6g} s steps: snapped to it",
+                            {"column": column, "off": float(abs(off[worst]) * slope), "step": float(slope)},
+                            "nothing, if the logger's clock jitters; else check the time column"))
         t = grid
     data = replace(data, time=_frozen(t), sample_time=slope, max_step_deviation=float(np.max(np.abs(np.diff(off)))),
                    notes=tuple(notes))
@@ -93,12 +96,20 @@ def longest(parts: list[Dataset]) -> Dataset:
     best = max(parts, key=lambda p: p.n_rows)
     if len(parts) == 1:
         return best
-    return replace(best, notes=best.notes + (f"of the {len(parts)} parts the longest ({best.n_rows} rows) is used",))
+    note = Notice("TIME004", f"of the {len(parts)} parts the longest ({best.n_rows} rows) is used",
+                  {"parts": len(parts), "rows": best.n_rows}, "give the other parts as records of their own")
+    return replace(best, notes=best.notes + (note,))
+
+
+def record_notices(records) -> list[Notice]:
+    """Every record's notes, each once, prefixed by its file."""
+    found = (n.prefixed(f"{d.path}: ") for d in records for n in d.notes)
+    return list({n.message: n for n in found}.values())
 
 
 def record_notes(records) -> list[str]:
-    """Every record's notes, each once, prefixed by its file."""
-    return list(dict.fromkeys(f"{d.path}: {n}" for d in records for n in d.notes))
+    """The sentences of :func:`record_notices`."""
+    return list(messages(record_notices(records)))
 
 
 def _split(data: Dataset, index: np.ndarray, column: str) -> list[Dataset]:
@@ -117,7 +128,10 @@ def _split(data: Dataset, index: np.ndarray, column: str) -> list[Dataset]:
         note += f"; {len(parts) - len(kept)} part(s) shorter than {MIN_PART} rows dropped"
     if not kept:
         raise _fail(data, "CSV009", f"{note}: no part of at least {MIN_PART} rows is left", None)
-    base = replace(data, notes=data.notes + (note,))
+    said = Notice("TIME002", note, {"column": column, "gaps": len(jumps), "records": [[a, b - 1] for a, b in kept],
+                                    "dropped": len(parts) - len(kept)},
+                  "nothing, if the logger dropped samples; each part is fitted from its own initial state")
+    base = replace(data, notes=data.notes + (said,))
     return [base.slice(a, b) for a, b in kept]
 
 
@@ -132,8 +146,10 @@ def _resample(data: Dataset, sample_time: float) -> Dataset:
                for name, v in data.columns.items()}
     n = len(next(iter(columns.values())))
     time = _frozen(data.time[0] + sample_time * np.arange(n))
-    note = (f"resampled from {data.sample_time:.6g} s to the chart's {sample_time:.6g} s (scipy.signal.resample_poly, "
-            f"up {up}, down {down}): {data.n_rows} rows -> {n}")
+    note = Notice("TIME003", f"resampled from {data.sample_time:.6g} s to the chart's {sample_time:.6g} s "
+                  f"(scipy.signal.resample_poly, up {up}, down {down}): {data.n_rows} rows -> {n}",
+                  {"from": float(data.sample_time), "to": float(sample_time), "up": up, "down": down,
+                   "rows": data.n_rows, "rows_after": n}, "log at the chart's sample time to fit the raw samples")
     return replace(data, columns=columns, time=time, n_rows=n, sample_time=sample_time, max_step_deviation=0.0,
                    notes=data.notes + (note,), lines=None, row0=0)
 

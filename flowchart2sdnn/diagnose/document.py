@@ -19,6 +19,7 @@ from pathlib import Path
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify.document import from_document as identification_from
+from ..notices import Notice
 from .fitting import DiagnoseSettings
 from .result import (
     AcceptedEffect,
@@ -40,7 +41,7 @@ __all__ = ["to_document", "from_document", "dumps", "read_report", "load_report"
 # ------------------------------------------------------------------------------------------------ reading
 _KNOWN = {"format", "version", "stop", "last_round", "n_accepted", "first_fit", "interrupted", "candidates",
           "rounds", "accepted", "before", "after", "whiteness", "final", "settings", "timing", "data_notes",
-          "command"}
+          "data_notices", "command"}
 
 
 def _tuple(x):
@@ -113,6 +114,7 @@ def from_document(doc: Mapping, chart: Diagram | None = None) -> Diagnosis:
         settings=_settings(doc["settings"]), split=doc["settings"].get("split"),
         effects=tuple(doc["settings"].get("effects") or ()), timing=dict(doc.get("timing") or {}),
         data_notes=tuple(doc.get("data_notes") or ()), command=doc.get("command"),
+        data_notices=tuple(Notice.from_dict(n) for n in doc.get("data_notices") or ()),
         extra={k: v for k, v in doc.items() if k not in _KNOWN}, diagram=chart)
 
 

@@ -19,6 +19,7 @@ from typing import Any
 
 from ..diagram.model import Diagram
 from ..identify.result import Identification
+from ..notices import Notice, aligned, messages
 from ..views import view
 from .fitting import DiagnoseSettings
 
@@ -213,6 +214,7 @@ class Diagnosis:
     effects : tuple of str       the effects tried
     timing : {part: seconds}
     data_notes : tuple of str    the records' notes (time base, delimiter)
+    data_notices : tuple of Notice   the same notes as records (code, numbers, advice), one per note
     command : {key: value} or None   the command line that wrote the report
     extra : {key: value}         further REPORT.json keys, kept so a document reads back unchanged
 
@@ -244,6 +246,12 @@ class Diagnosis:
     final: Any = field(default=None, repr=False)
     nominal: Any = field(default=None, repr=False)
     screens: tuple = field(default=(), repr=False)
+    data_notices: tuple[Notice, ...] = ()
+
+    def __post_init__(self) -> None:
+        # the sentences lead, as in Identification: a note given alone gets an uncoded record
+        object.__setattr__(self, "data_notices", aligned(self.data_notes, self.data_notices))
+        object.__setattr__(self, "data_notes", tuple(str(n) for n in self.data_notes))
 
     def __repr__(self) -> str:
         return view("diagnosis_line")(self)
@@ -282,15 +290,23 @@ class Diagnosis:
     @property
     def warnings(self) -> tuple[str, ...]:
         """What to know before trusting the diagnosis: the records' notes, how the run ended when that was not
-        its own decision, and the final fit's warnings."""
+        its own decision, and the final fit's warnings (the sentences of :attr:`notices`)."""
+        return messages(self.notices)
+
+    @property
+    def notices(self) -> tuple[Notice, ...]:
+        """:attr:`warnings` as records (code, message, numbers, advice)."""
         own = []
         if self.interrupted:
-            own.append("interrupted (Ctrl-C): the chart holds what was accepted before")
+            own.append(Notice("STOP001", "interrupted (Ctrl-C): the chart holds what was accepted before", {},
+                              "run again to trace the rest"))
         if self.stop == "first_fit_not_converged":
             moving = ", ".join(self.first_fit.still_moving) or "?"
-            own.append(f"the first fit stopped ({self.first_fit.status}) while {moving} still moved by more than "
-                       "their standard error: nothing was traced")
-        return tuple(self.data_notes) + tuple(own) + tuple(self.identification.warnings)
+            own.append(Notice("TRACE001", f"the first fit stopped ({self.first_fit.status}) while {moving} still "
+                              "moved by more than their standard error: nothing was traced",
+                              {"status": self.first_fit.status, "still_moving": list(self.first_fit.still_moving)},
+                              "raise --max-iter, or start closer (or --allow-unconverged to trace anyway)"))
+        return tuple(self.data_notices) + tuple(own) + tuple(self.identification.notices)
 
     def to_document(self) -> dict:
         """The REPORT.json body, a new dict each call (see :mod:`flowchart2sdnn.diagnose.document`)."""

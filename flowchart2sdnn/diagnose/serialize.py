@@ -82,6 +82,7 @@ def to_document(d: Diagnosis) -> dict:
     }
     if d.data_notes:
         doc["data_notes"] = list(d.data_notes)
+        doc["data_notices"] = [n.to_dict() for n in d.data_notices]  # the notes as records, codes beside them
     if d.command is not None:
         doc["command"] = _plain(d.command)
     doc.update(d.extra)

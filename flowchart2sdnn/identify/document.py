@@ -18,6 +18,7 @@ from pathlib import Path
 from ..diagram.dump import with_values
 from ..diagram.model import Diagram
 from ..errors import SdnnError
+from ..notices import Notice
 from .result import (
     ChartSource,
     Curve,
@@ -40,7 +41,7 @@ __all__ = ["to_document", "from_document", "dumps", "read_result", "load_result"
 
 # ------------------------------------------------------------------------------------------------ reading
 _KNOWN = {"format", "version", "status", "message", "interrupted", "converged", "parameters", "nonlinear", "fit", "warnings",
-          "settings", "seed", "chart", "data", "versions", "optimizer", "multistart", "uncertainty", "online"}
+          "notices", "settings", "seed", "chart", "data", "versions", "optimizer", "multistart", "uncertainty", "online"}
 
 
 def _nan(x):
@@ -90,6 +91,7 @@ def from_document(doc: dict, chart: Diagram | None = None) -> Identification:
                 for b, c in doc["nonlinear"].items()},
         fit=Fit(_read_metrics(fit["train"]), None if fit["validation"] is None else _read_metrics(fit["validation"])),
         warnings=tuple(w for w in doc["warnings"] if not w.startswith(NON_FINITE)),
+        notices=tuple(Notice.from_dict(n) for n in doc.get("notices") or ()),  # older files: uncoded records
         settings=settings, chart=chart,
         source=ChartSource(doc["chart"]["name"], doc["chart"]["file"], doc["chart"]["sha256"]),
         data=DataInfo(_read_record(data["train"]), tuple(_read_record(r) for r in data["train_records"]),

@@ -14,6 +14,7 @@ import numpy as np
 from .. import rules
 from ..errors import SdnnError
 from ..fit.uncertainty import covariance
+from ..notices import Notice
 from .problem import CHATTER_LIMIT, GROWTH_LIMIT, Problem
 from .result import Uncertainty
 
@@ -30,7 +31,7 @@ class Evidence:
     None where unavailable; the :class:`Uncertainty` of the result; warnings; whether the data excite nothing."""
 
     def __init__(self, stderr=None, half=None, uncertainty: Uncertainty | None = None,
-                 warnings: list[str] | None = None, no_excitation: bool = False):
+                 warnings: list[Notice] | None = None, no_excitation: bool = False):
         self.stderr, self.half, self.uncertainty = stderr, half, uncertainty
         self.warnings = warnings or []
         self.no_excitation = no_excitation
@@ -54,8 +55,11 @@ def assess(problem: Problem, x: np.ndarray, diverged: bool) -> Evidence:
             rho, inflation = _coloured_residual(fe[0], len(problem.compiled.output_names))
     radius = problem.chatter(x)
     if radius > CHATTER_WARN:
-        out.warnings.append(f"the fitted network is close to chattering at rest (eigenvalue {-radius:.3f}); a "
-                            "learned curve is nearly as steep as the sample time allows (about 2*J/T)")
+        out.warnings.append(Notice(
+            "STAB001", f"the fitted network is close to chattering at rest (eigenvalue {-radius:.3f}); a "
+            "learned curve is nearly as steep as the sample time allows (about 2*J/T)",
+            {"eigenvalue": -float(radius), "warn_at": CHATTER_WARN},
+            "more sub-steps, or bounds that keep the learned curve's slope below 2*J/T"))
     if cov is None or not cov.available:
         return out
     out.stderr = np.where(np.isfinite(cov.stderr), cov.stderr * inflation, np.nan)
@@ -85,7 +89,7 @@ def _step_words(network) -> str:
     return f"network step h = T/{network.substeps} = {network.step:g} s (limit about 2*J/h)"
 
 
-def start_stability(problem: Problem, x0: np.ndarray) -> tuple[Problem, list[str]]:
+def start_stability(problem: Problem, x0: np.ndarray) -> tuple[Problem, list[Notice]]:
     """Check the start at rest. Chatter (a sign flip every sample) cannot be fitted away: an error. A start that
     drifts away from rest can: warn, and let the guard accept steps no worse than the start."""
     if not problem.names:
@@ -99,19 +103,24 @@ def start_stability(problem: Problem, x0: np.ndarray) -> tuple[Problem, list[str
             hint="soften the curve (a larger eps of sign_smooth, a smaller k or init) or use a learned `nonlinear` block")
     if growth <= GROWTH_LIMIT:
         return problem, []
-    warning = (f"at its initial values the chart's discrete network drifts away from rest (eigenvalue {growth:.3f}): "
-               "a curve in a feedback loop has a negative slope at zero; the fit may take long to recover")
+    warning = Notice(
+        "START001", f"at its initial values the chart's discrete network drifts away from rest (eigenvalue "
+        f"{growth:.3f}): a curve in a feedback loop has a negative slope at zero; the fit may take long to recover",
+        {"eigenvalue": float(growth), "limit": GROWTH_LIMIT},
+        "start the curve with a slope of zero or more at zero (its init)")
     return replace(problem, stability_floor=(chatter, growth)), [warning]
 
 
-def on_bound_warnings(names, x0: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> list[str]:
+def on_bound_warnings(names, x0: np.ndarray, lower: np.ndarray, upper: np.ndarray) -> list[Notice]:
     """Starts exactly on a bound: allowed, but the bound transform is flat there and such a quantity moves slowly."""
     out = []
     for name, x, lo, hi in zip(names, x0, lower, upper, strict=True):
         side = "lower" if x == lo else "upper" if x == hi else None
         if side:
-            out.append(f"{name} starts on its {side} bound ({x:g}); it can move away only slowly (the bound "
-                       "transform is flat there): start it inside the bounds")
+            out.append(Notice("START002", f"{name} starts on its {side} bound ({x:g}); it can move away only slowly "
+                              "(the bound transform is flat there): start it inside the bounds",
+                              {"parameter": name, "side": side, "value": float(x)},
+                              f"give {name} an init strictly inside its bounds"))
     return out
 
 
@@ -138,7 +147,7 @@ def _coloured_residual(residual: np.ndarray, n_outputs: int) -> tuple[float | No
     return rho, float(np.sqrt((1 + r) / (1 - r)))
 
 
-def _identifiability_warnings(cov, problem: Problem) -> list[str]:
+def _identifiability_warnings(cov, problem: Problem) -> list[Notice]:
     """Groups that cannot be told apart, when they involve a physical parameter.
 
     The weights of one learned curve trade off against each other all the time (a*v of a nearly linear
@@ -148,14 +157,18 @@ def _identifiability_warnings(cov, problem: Problem) -> list[str]:
     out = []
     for group in cov.unidentifiable:
         if physical & set(group):
-            out.append(f"cannot be told apart from this data: {', '.join(group)} (fix all but one, or excite more)")
+            out.append(Notice("IDENT001", f"cannot be told apart from this data: {', '.join(group)} (fix all but "
+                              "one, or excite more)", {"parameters": list(group)},
+                              "fix all but one, or excite more"))
     for a, b, r in cov.correlated:
         if {a, b} & physical and not any({a, b} <= set(g) for g in cov.unidentifiable):
-            out.append(f"{a} and {b} are almost interchangeable here (correlation {r:+.4f})")
+            out.append(Notice("IDENT002", f"{a} and {b} are almost interchangeable here (correlation {r:+.4f})",
+                              {"parameters": [a, b], "correlation": float(r)},
+                              f"fix one of {a} and {b}, or excite the machine so that they act apart"))
     return out
 
 
-def sqrt_domain_warnings(problem: Problem, x: np.ndarray) -> list[str]:
+def sqrt_domain_warnings(problem: Problem, x: np.ndarray) -> list[Notice]:
     """The samples where a `sqrt` block's argument went negative in the fitted model (lint can only say that it
     may). There the chart's sqrt is -sqrt(-z): a flow that reverses, never a NaN, but a level that should not
     go below 0 did, and the user should know."""
@@ -176,6 +189,9 @@ def sqrt_domain_warnings(problem: Problem, x: np.ndarray) -> list[str]:
     blocks = {b.name: b for b in problem.diagram.blocks}
     # the network's root is the chart's over sqrt(eps) (compiler.discretize.output_scale)
     scale = {n: math.sqrt(blocks[n].eps or 1e-3) if n in blocks else 1.0 for n in layers}
-    return [f"sqrt '{name}': its argument was negative on {counts[name]} of {total} samples of the training data "
-            f"(there sqrt(z) is taken as -sqrt(-z), a reversed flow; the root fell to {lowest[name] * scale[name]:.3g})"
+    return [Notice("SQRT001", f"sqrt '{name}': its argument was negative on {counts[name]} of {total} samples of the "
+                   f"training data (there sqrt(z) is taken as -sqrt(-z), a reversed flow; the root fell to "
+                   f"{lowest[name] * scale[name]:.3g})",
+                   {"block": name, "negative": counts[name], "samples": total, "lowest": lowest[name] * scale[name]},
+                   "check the chart: a level that must stay at or above 0 went below it in the fitted model")
             for name in layers if counts[name]]

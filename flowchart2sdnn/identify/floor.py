@@ -22,6 +22,7 @@ from ..analysis.loops import delay_rule
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..network.alignment import fitted_rows, run_aligned
+from ..notices import Notice
 from .problem import columns_of, data_init, network_input_names
 
 __all__ = ["FLOOR_WARN", "oracle_steps", "oracle_rows", "oracle_runs", "measure_floor", "floor_warnings",
@@ -113,12 +114,12 @@ def pooled_floor(floor: dict) -> float | None:
     return math.sqrt(sum(v * v for v in rms.values()) / len(rms))
 
 
-def floor_warnings(floor: dict, residual_rms, chart: Diagram | None, network) -> list[str]:
+def floor_warnings(floor: dict, residual_rms, chart: Diagram | None, network) -> list[Notice]:
     """A warning per output whose floor exceeds FLOOR_WARN of its residual RMS, with what to change."""
     rms = floor.get("rms")
     if not rms:
         return []
-    over, worst = [], 0.0
+    over, worst, shares = [], 0.0, {}
     for name, f in rms.items():
         r = residual_rms.get(name)
         if r is None or not math.isfinite(r):
@@ -126,6 +127,7 @@ def floor_warnings(floor: dict, residual_rms, chart: Diagram | None, network) ->
         if f > FLOOR_WARN * r:
             over.append(f"{name} {f:.3g} ({'inf' if r == 0 else f'{100 * f / r:.0f}'} % of its residual RMS {r:.3g})")
             worst = max(worst, f / r if r > 0 else math.inf)
+            shares[name] = {"floor": f, "residual_rms": r, "share": f / r if r > 0 else math.inf}
     if not over:
         return []
     n = network.substeps
@@ -137,7 +139,10 @@ def floor_warnings(floor: dict, residual_rms, chart: Diagram | None, network) ->
     advice = [f"`substeps: {suggest}` in the chart (or --substeps {suggest}; the floor falls about as 1/N)"]
     if chart is None or delay_rule(chart) not in ("torques", "midpoint"):
         advice.append("`delays: torques`")
-    return [f"the discretization floor (the network against the continuous chart, identified values, training "
-            f"input) is more than {100 * FLOOR_WARN:.0f} % of the residual on {'; '.join(over)}: that part of the "
-            f"residual is the network's own step error, and the parameters absorb it; use "
-            f"{' and '.join(advice)}"]
+    use = ' and '.join(advice)
+    return [Notice("FLOOR001", f"the discretization floor (the network against the continuous chart, identified "
+                   f"values, training input) is more than {100 * FLOOR_WARN:.0f} % of the residual on "
+                   f"{'; '.join(over)}: that part of the residual is the network's own step error, and the "
+                   f"parameters absorb it; use {use}",
+                   {"warn_at": FLOOR_WARN, "outputs": shares, "substeps": n, "suggested_substeps": suggest},
+                   f"use {use}")]

@@ -26,6 +26,7 @@ from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..fit.lm import LMOptions
 from ..network.alignment import fitted_rows
+from ..notices import Notice
 from .floor import oracle_runs, oracle_steps
 from .problem import Problem
 from .workers import run_start
@@ -131,7 +132,7 @@ def estimate_floor_bias(problem: Problem, chart: Diagram, xs: np.ndarray, record
                                 f"unconverged); beta = refitted - identified, corrected = identified - beta"}}
 
 
-def floor_bias_warnings(bias: dict, stderr: Mapping[str, float | None]) -> list[str]:
+def floor_bias_warnings(bias: dict, stderr: Mapping[str, float | None]) -> list[Notice]:
     """One warning naming every parameter whose |beta| exceeds BIAS_WARN of its standard error."""
     beta = bias.get("beta")
     if not beta:
@@ -139,16 +140,22 @@ def floor_bias_warnings(bias: dict, stderr: Mapping[str, float | None]) -> list[
     out = []
     refit = bias.get("refit") or {}
     if refit.get("status") == "max_iter" and (refit.get("beta_change") or 0.0) > BETA_SETTLED:
-        out.append(f"the discretization-bias refit did not converge in {refit.get('iterations')} iterations and beta "
-                   f"still moved by {100 * refit['beta_change']:.0f} % over the last half: it is a first-order "
-                   f"estimate that may fall short (the bias is large; more sub-steps shrink it)")
-    over = []
+        out.append(Notice("FLOOR003", f"the discretization-bias refit did not converge in {refit.get('iterations')} "
+                          f"iterations and beta still moved by {100 * refit['beta_change']:.0f} % over the last "
+                          f"half: it is a first-order estimate that may fall short (the bias is large; more "
+                          f"sub-steps shrink it)",
+                          {"iterations": refit.get("iterations"), "beta_change": refit["beta_change"]},
+                          "use more sub-steps"))
+    over, shifted = [], {}
     for name, b in beta.items():
         s = stderr.get(name)
         if s and abs(b) > BIAS_WARN * s:
             over.append(f"{name} by {b:+.3g} ({abs(b) / s:.1f} standard errors)")
+            shifted[name] = {"beta": b, "standard_errors": abs(b) / s}
     if not over:
         return out
-    return out + [f"the noise-only 95 % intervals (ci95_noise) reflect the noise only; the discretization shifts "
-                  f"{', '.join(over)}: ci95 is widened by |beta|, the corrected values (identified - beta) are in "
-                  f"RESULT.json discretization.bias (or use more sub-steps)"]
+    return out + [Notice("FLOOR004", f"the noise-only 95 % intervals (ci95_noise) reflect the noise only; the "
+                         f"discretization shifts {', '.join(over)}: ci95 is widened by |beta|, the corrected values "
+                         f"(identified - beta) are in RESULT.json discretization.bias (or use more sub-steps)",
+                         {"warn_at": BIAS_WARN, "shifted": shifted},
+                         "read ci95 (widened by |beta|) or the corrected values, or use more sub-steps")]

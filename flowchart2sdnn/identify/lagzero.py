@@ -21,6 +21,7 @@ from __future__ import annotations
 import numpy as np
 
 from .. import rules
+from ..notices import Notice
 
 __all__ = ["LAG_ZERO_Z", "LAG_ZERO_MIN", "lag_zero_correlations", "lag_zero_warnings"]
 
@@ -83,7 +84,7 @@ def _chance_sd(e: np.ndarray, u: np.ndarray) -> float:
     return float(np.sqrt(max(var, 1.0 / n)))
 
 
-def lag_zero_warnings(problem, x) -> list[str]:
+def lag_zero_warnings(problem, x) -> list[Notice]:
     """The warnings of :func:`lag_zero_correlations` beyond chance (one per input and output), naming the
     option to try."""
     found: dict[tuple[str, str], tuple[str, float, float]] = {}
@@ -93,9 +94,13 @@ def lag_zero_warnings(problem, x) -> list[str]:
     out = []
     for (name, output), (what, r, sd) in found.items():
         signal = name if what == "u" else f"the change of {name} over the sample"
-        out.append(f"the residual on {output} follows {signal} at lag 0 (r = {r:+.2f}; by chance within about "
-                   f"+-{LAG_ZERO_Z * sd:.2f}): the held input {name} may move smoothly between its samples (a "
-                   f"measured signal rather than a held command): try `intersample: linear` on it (chart: inputs: "
-                   f"{{{name}: {{intersample: linear}}}}, or --intersample {name}=linear), or a dead time (inputs: "
-                   f"{{{name}: {{delay: tau}}}} with a parameter tau in s)")
+        out.append(Notice(
+            "LAG001", f"the residual on {output} follows {signal} at lag 0 (r = {r:+.2f}; by chance within about "
+            f"+-{LAG_ZERO_Z * sd:.2f}): the held input {name} may move smoothly between its samples (a "
+            f"measured signal rather than a held command): try `intersample: linear` on it (chart: inputs: "
+            f"{{{name}: {{intersample: linear}}}}, or --intersample {name}=linear), or a dead time (inputs: "
+            f"{{{name}: {{delay: tau}}}} with a parameter tau in s)",
+            {"input": name, "output": output, "of": "change" if what != "u" else "value", "r": r,
+             "chance": LAG_ZERO_Z * sd},
+            f"try `intersample: linear` on {name}, or a dead time on it"))
     return out

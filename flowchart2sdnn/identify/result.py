@@ -19,6 +19,7 @@ from typing import Any
 import numpy as np
 
 from ..diagram.model import Diagram
+from ..notices import Notice, aligned
 from ..views import view
 from .extra import Extra
 from .settings import IdentifySettings
@@ -194,7 +195,10 @@ class Identification:
     parameters : {name: Estimate}   every chart parameter, fixed ones included, in chart order
     curves : {block: Curve}      the learned curves
     fit : Fit                    training and validation metrics
-    warnings : tuple of str
+    warnings : tuple of str      what the user should know, as sentences (RESULT.json's ``warnings``)
+    notices : tuple of Notice    the same warnings as records, one per sentence in its order: code, message,
+                                 the numbers it states, advice (a sentence given without one gets an uncoded
+                                 record; docs/guide/warnings.md lists the codes)
     settings : IdentifySettings
     chart : Diagram or None      the identified chart (values as init, learned curves stored); None when read
                                  from a RESULT.json alone
@@ -236,8 +240,12 @@ class Identification:
     x: np.ndarray | None = field(default=None, repr=False)
     lm: Any = field(default=None, repr=False)
     online_run: Any = field(default=None, repr=False)
+    notices: tuple[Notice, ...] = ()
 
     def __post_init__(self) -> None:
+        # the sentences lead: code that replaces `warnings` alone keeps a record per sentence
+        object.__setattr__(self, "notices", aligned(self.warnings, self.notices))
+        object.__setattr__(self, "warnings", tuple(str(w) for w in self.warnings))
         if not isinstance(self.extra, Extra):
             object.__setattr__(self, "extra", Extra.of(self.extra))
 

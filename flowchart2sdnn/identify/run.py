@@ -33,6 +33,7 @@ from ..errors import SdnnError
 from ..executors import SerialExecutor
 from ..fit.lm import CONVERGED_STATUSES, CRAWL_DETAIL, LMOptions, LMResult
 from ..fit.multistart import draw_starts, run_multistart
+from ..notices import Notice, messages
 from .curvestart import curve_start
 from .evidence import assess, no_excitation_message, on_bound_warnings, sqrt_domain_warnings, start_stability
 from .floor import FLOOR_WARN, floor_warnings, measure_floor, oracle_runs
@@ -86,7 +87,7 @@ class _Outcome:
     lm: LMResult | None = None
     online: object | None = None
     multistart: MultistartSummary | None = None
-    multistart_warning: str | None = None
+    multistart_warning: Notice | None = None
     curve_start: dict | None = None
 
 
@@ -162,7 +163,9 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         warnings.append(out.multistart_warning)
     shooting = _shooting(settings, out.lm, auto) if settings.shooting != "off" or auto is not None else None
     if shooting and shooting.get("predictable") is False:
-        warnings.append(shooting["note"])
+        warnings.append(Notice("SHOOT001", shooting["note"], {"final_length": shooting["final_length"]},
+                               f"validate the fit on horizons of up to {shooting['final_length']} samples "
+                               f"(`sdnn compare --horizon {shooting['final_length']}`)"))
     x, status, message, interrupted = out.x, out.status, out.message, out.interrupted
     if status == "callback_stop" or message.startswith("stopped by the callback"):  # `stop`: the CLI's Ctrl-C
         status, interrupted = "interrupted", True
@@ -173,12 +176,15 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         status, message, x = "no_excitation", no_excitation_message(problem), x0
     converged = None if out.lm is None or status == "no_excitation" else status in CONVERGED_STATUSES
     if converged is False and not interrupted:
-        warnings.append(f"not converged: {message}; the parameters may be far from the minimum (raise max_iter, "
-                        "or start closer)")
+        warnings.append(Notice("CONV001", f"not converged: {message}; the parameters may be far from the minimum "
+                               "(raise max_iter, or start closer)", {"status": status, "max_iter": settings.max_iter},
+                               "raise max_iter, or start closer"))
     if converged and CRAWL_DETAIL in message:
         gain = message.split(CRAWL_DETAIL + ": ", 1)[-1].rstrip(")")  # "<fraction> of the cost over the last N ..."
-        warnings.append(f"converged at the noise floor while still creeping ({gain}): the fit moves along a "
-                        "direction the data barely determine; read the parameters with their ci95 and correlations")
+        warnings.append(Notice("CONV002", f"converged at the noise floor while still creeping ({gain}): the fit "
+                               "moves along a direction the data barely determine; read the parameters with their "
+                               "ci95 and correlations", {"creep": gain},
+                               "read the parameters with their ci95 and correlations"))
     warnings.extend(evidence.warnings)
     if status != "diverged_at_start":
         warnings.extend(sqrt_domain_warnings(problem, x))
@@ -223,16 +229,19 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
             given = full if settings.split is not None else (records if more else train)
             again = identify(replace(with_values(diagram, params, curves), substeps=finer), given, validation,
                              replace(settings, shooting=requested_shooting), progress, executor, stop)
-            note = (f"substeps auto: N = {problem.network.substeps}, read at the chart's init, is too coarse for the "
-                    f"fitted curves (the network's step error above {FLOOR_WARN:g}x the residual, or a mode held at "
-                    f"the step's stability limit); refitted from that fit at N = {finer}")
+            note = Notice("FLOOR002", f"substeps auto: N = {problem.network.substeps}, read at the chart's init, is "
+                          f"too coarse for the fitted curves (the network's step error above {FLOOR_WARN:g}x the "
+                          f"residual, or a mode held at the step's stability limit); refitted from that fit at N = "
+                          f"{finer}", {"substeps": problem.network.substeps, "refitted_at": finer,
+                                       "warn_at": FLOOR_WARN},
+                          f"write `substeps: {finer}` (or more) in the chart to fit at once")
             inits = {p.name: float(p.init) for p in diagram.parameters}
             again_params = {n: replace(e, init=inits.get(n, e.init)) for n, e in again.parameters.items()}
             first = {"substeps": problem.network.substeps, "iterations": out.lm.iterations, "cost": float(out.lm.cost),
                      **({"then": again.extra["substeps_refit"]} if "substeps_refit" in again.extra else {})}
             disc_again = {**again.extra.get("discretization", {}), "requested": disc.get("requested")}
-            kept = start_warnings + tuple(w for w in again.warnings if w not in start_warnings)
-            return replace(again, parameters=again_params, warnings=(note,) + kept,
+            kept = (note,) + start_warnings + tuple(w for w in again.notices if w not in start_warnings)
+            return replace(again, parameters=again_params, warnings=messages(kept), notices=kept,
                            source=ChartSource(diagram.name, diagram.file, diagram.source_sha256),
                            extra={**again.extra, "discretization": disc_again, "substeps_refit": first})
         warnings.extend(floor_warnings(disc["floor"], fit.train.rms, diagram, problem.network))
@@ -246,7 +255,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
         curves={b: Curve(tuple(c["a"]), tuple(c["v"]), tuple(c["b"]) if "b" in c else None, c["fixed"],
                          c.get("c"))
                 for b, c in curves.items()},
-        fit=fit, warnings=tuple(warnings), settings=settings, chart=chart,
+        fit=fit, warnings=messages(warnings), notices=tuple(warnings), settings=settings, chart=chart,
         source=ChartSource(diagram.name, diagram.file, diagram.source_sha256),
         data=DataInfo(_record(full if settings.split is not None else train),
                       tuple(_record(d) for d in ([full] if settings.split is not None else [train] + more)),
@@ -281,16 +290,18 @@ def _finer_substeps(diagram: Diagram, problem: Problem, floor: dict, rms: dict, 
     return min(AUTO_CAP, 4 * n) if over or held else None
 
 
-def _far_above_noise(problem: Problem, cost: float | None) -> list[str]:
+def _far_above_noise(problem: Problem, cost: float | None) -> list[Notice]:
     """The warning of a free-run training cost whose RMS is more than FAR_ABOVE_NOISE x the records' noise."""
     m = sum(s.targets.size for s in problem.segments)
     floor = noise_cost(problem, 1.0) * m  # the cost of a residual at the noise
     if cost is None or not floor > 0 or not cost > FAR_ABOVE_NOISE ** 2 * floor:
         return []
-    return [f"the training residual RMS is {math.sqrt(cost / floor):.3g}x the noise read off the records' second "
-            f"differences (a complete chart at its minimum ends within about {FAR_ABOVE_NOISE:g}x): the chart may "
-            "lack an effect (try `sdnn diagnose`) or the fit may sit in a local minimum (try --starts 8, or `init` "
-            "values closer to the machine)"]
+    ratio = math.sqrt(cost / floor)
+    return [Notice("NOISE001", f"the training residual RMS is {ratio:.3g}x the noise read off the records' second "
+                   f"differences (a complete chart at its minimum ends within about {FAR_ABOVE_NOISE:g}x): the chart "
+                   "may lack an effect (try `sdnn diagnose`) or the fit may sit in a local minimum (try --starts 8, "
+                   "or `init` values closer to the machine)", {"ratio": ratio, "warn_at": FAR_ABOVE_NOISE},
+                   "try `sdnn diagnose`, or --starts 8, or `init` values closer to the machine")]
 
 
 def with_floor_bias(ident: Identification, train: Sequence[Dataset]) -> Identification:
@@ -306,13 +317,14 @@ def with_floor_bias(ident: Identification, train: Sequence[Dataset]) -> Identifi
     free = {n: e for n, e in ident.parameters.items() if not e.fixed and n in problem.names}
     disc["bias"], parameters, bias_warnings = _floor_bias(problem, ident.chart, ident.x, list(train), ident.settings,
                                                           ident.parameters, free)
-    warnings = ident.warnings + tuple(bias_warnings)
-    return replace(ident, parameters=parameters, warnings=warnings, settings=replace(ident.settings, floor_bias=True),
+    notices = ident.notices + tuple(bias_warnings)
+    return replace(ident, parameters=parameters, warnings=messages(notices), notices=notices,
+                   settings=replace(ident.settings, floor_bias=True),
                    extra={**ident.extra, "discretization": disc})
 
 
 def _floor_bias(problem: Problem, chart, x, records: list, settings: IdentifySettings, parameters: dict, free: dict,
-                oracle=None) -> tuple[dict, dict, list[str]]:
+                oracle=None) -> tuple[dict, dict, list[Notice]]:
     """(RESULT.json's `discretization.bias`, `parameters` with the reported ci95 covering the noise and the
     discretization's shift (ci95_noise keeps the former), the warnings) at the fitted point x."""
     lower, upper = problem.bounds()
@@ -510,7 +522,7 @@ def _offline(problem: Problem, x0, lower, upper, settings: IdentifySettings, pro
     summary = _summary(ms, problem.names if settings.starts > 1 else None)
     return _Outcome(np.asarray(best.x, dtype=float), "interrupted" if interrupted else best.status, best.message,
                     interrupted, lm=best, multistart=summary,
-                    multistart_warning=ms.message if settings.starts > 1 and ms.local_minima else None,
+                    multistart_warning=_minima(ms) if settings.starts > 1 and ms.local_minima else None,
                     curve_start=warm.to_dict() if warm is not None and warm.curves else None)
 
 
@@ -555,7 +567,17 @@ def _online(problem: Problem, x0, lower, upper, settings: IdentifySettings, prog
                        message="interrupted: the best of the runs finished so far is returned")
     return _Outcome(np.asarray(best.theta_mean, dtype=float), best.status, best.message,
                     best.status == "interrupted", online=best, multistart=_summary(ms, problem.names, _ONLINE_COST),
-                    multistart_warning=ms.message if ms.local_minima else None)
+                    multistart_warning=_minima(ms) if ms.local_minima else None)
+
+
+def _minima(ms) -> Notice:
+    """The warning of starts that ended in different minima (the multi-start summary's sentence)."""
+    costs = [float(c) for c in ms.costs]
+    return Notice("CONV003", ms.message,
+                  {"runs": len(ms.results), "best": ms.best_index, "cost": costs[ms.best_index],
+                   "local_minima": list(ms.local_minima),
+                   "local_costs": [costs[k] for k in ms.local_minima]},
+                  "the best run is the result; compare its parameters with the others' (RESULT.json multistart)")
 
 
 def _summary(ms, names, cost: str | None = None) -> MultistartSummary:

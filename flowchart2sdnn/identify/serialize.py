@@ -14,6 +14,7 @@ import json
 from dataclasses import asdict
 from typing import TYPE_CHECKING
 
+from ..notices import Notice
 from ..strictjson import strict_json
 
 if TYPE_CHECKING:  # names for annotations only: importing result here would close the cycle again
@@ -65,6 +66,7 @@ def to_document(ident: Identification) -> dict:
         "fit": {"train": _metrics(ident.fit.train),
                 "validation": None if ident.fit.validation is None else _metrics(ident.fit.validation)},
         "warnings": list(ident.warnings),
+        "notices": [n.to_dict() for n in ident.notices],  # the warnings as records: code, numbers, advice
         "settings": _settings(ident.settings),
         "seed": ident.settings.seed,
         "chart": {"name": ident.source.name, "file": ident.source.file, "sha256": ident.source.sha256},
@@ -99,7 +101,10 @@ def to_document(ident: Identification) -> dict:
     bad: list[str] = []
     doc = strict_json(doc, "", bad)
     if bad:
-        doc["warnings"].append(f"{NON_FINITE}{', '.join(bad[:5])}" + (f" (+{len(bad) - 5} more)" if len(bad) > 5 else ""))
+        said = Notice("JSON001", f"{NON_FINITE}{', '.join(bad[:5])}" + (f" (+{len(bad) - 5} more)" if len(bad) > 5 else ""),
+                      {"places": bad}, "read those values from the identified chart or the run's log")
+        doc["warnings"].append(said.message)
+        doc["notices"].append(said.to_dict())
     doc.update(ident.extra)
     return doc
 

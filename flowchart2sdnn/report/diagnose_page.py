@@ -19,6 +19,7 @@ from pathlib import Path
 from ..data.csvdata import Dataset
 from ..diagnose.loop import Diagnosis
 from ..identify.result import Metrics
+from ..notices import Notice
 from .diagnose_plots import figures
 from .diagnose_text import STOP_MESSAGES, _candidate_rows, _fit_pct
 from .html import chart_section, esc, figure, page, paragraph, section, table
@@ -80,7 +81,7 @@ def _rounds(report: dict) -> list[str]:
     return parts
 
 
-def _status(diagnosis: Diagnosis, notes: Sequence[str]) -> list[str]:
+def _status(diagnosis: Diagnosis, notes: Sequence[Notice | str]) -> list[str]:
     """How the run ended and every warning the command line printed: its notes on the data, the first fit's
     convergence, the stopping rule, the final fit's status and warnings (as the text report prints them)."""
     report = diagnosis.report
@@ -96,14 +97,14 @@ def _status(diagnosis: Diagnosis, notes: Sequence[str]) -> list[str]:
         moving = ", ".join(first.get("still_moving") or [])
         parts.append(paragraph(f"the first fit of the chart as given did not converge: {first.get('status')} - "
                                f"{first.get('message')}" + (f" (still moving: {moving})" if moving else ""), "warn"))
-    parts += [paragraph(f"note: {n}", "warn") for n in notes]
+    parts += [paragraph(n.one_line("note") if isinstance(n, Notice) else f"note: {n}", "warn") for n in notes]
     parts.append(paragraph("final chart's fit:"))
     parts += status_paragraphs(diagnosis.final.identification)
     return parts
 
 
 def diagnosis_html(diagnosis: Diagnosis, train: Dataset, validation: Sequence[Dataset] = (),
-                   command: str = "", notes: Sequence[str] = (), limit: int = 10, lags: int | None = None) -> str:
+                   command: str = "", notes: Sequence[Notice | str] = (), limit: int = 10, lags: int | None = None) -> str:
     """The whole page (see the module docstring); `train` the first training record, `validation` the
     validation records as given to :func:`flowchart2sdnn.diagnose.loop.diagnose`, `command` the command line
     that reproduces the run, `notes` what the command line printed about the data, `lags` those of the final

@@ -28,7 +28,7 @@ from .figures import compare_figure, fit_number, resid_figure, residual_time_fig
 from .html import chart_section, esc, figure, page, paragraph, section
 from .identify_plots import curve_figure, resid_inputs
 from .identify_tables import fit_section, parameter_sections
-from .identify_text import status_line, warning_lines
+from .identify_text import notice_lines, status_line
 from .linear import linear_model, residual_lags
 
 __all__ = ["identification_sections", "bode_section", "identification_html", "status_paragraphs"]
@@ -138,7 +138,9 @@ def identification_sections(outcome, records=(), validation=(), fixed_from: Sequ
 def status_paragraphs(outcome, printed: Sequence[str] = ()) -> list[str]:
     """The status line (the rule that stopped the fit) and every warning the command line printed: the
     result's own (as the text summary lists them) and `printed`, the ones it printed beside them."""
-    notes = list(dict.fromkeys([*warning_lines(outcome), *printed]))
+    own = notice_lines(outcome)
+    said = {n.message for n in own}
+    notes = [n.one_line() for n in own] + [f"warning: {w}" for w in dict.fromkeys(printed) if w not in said]
     if outcome.converged is True:
         rule = "converged"
     elif outcome.converged is False:
@@ -146,7 +148,7 @@ def status_paragraphs(outcome, printed: Sequence[str] = ()) -> list[str]:
     else:
         rule = "no convergence test applies"
     parts = [paragraph(f"{status_line(outcome)} ({rule})", "warn" if notes or outcome.converged is False else "ok")]
-    parts += [paragraph(f"warning: {w}", "warn") for w in notes]
+    parts += [paragraph(w, "warn") for w in notes]
     ms = outcome.multistart
     if ms and ms.n > 1:
         parts.append(paragraph(f"multi-start: {ms.n} starts, best #{ms.best_index}; {ms.message}"))

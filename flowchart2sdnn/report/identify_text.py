@@ -6,9 +6,10 @@ from collections.abc import Sequence
 
 from ..fit.stoprule import status_line as rule_line
 from ..identify.result import Identification
+from ..notices import Notice
 from ..tables import table
 
-__all__ = ["format_result", "status_line", "warning_lines"]
+__all__ = ["format_result", "status_line", "warning_lines", "notice_lines"]
 
 
 def _g(x) -> str:
@@ -21,11 +22,16 @@ def status_line(result: Identification) -> str:
     return rule_line(result.status, result.message, result.converged)
 
 
-def warning_lines(result: Identification) -> list[str]:
-    """The warnings the summary prints, in its order (the multi-start message is its own line, not repeated);
-    the HTML page shows the same list."""
+def notice_lines(result: Identification) -> list[Notice]:
+    """The warnings the summary prints, as records, in its order (the multi-start message is its own line, not
+    repeated); the HTML page shows the same list."""
     shown = {result.multistart.message} if result.multistart else set()
-    return [w for w in result.warnings if w not in shown]
+    return [n for n in result.notices if n.message not in shown]
+
+
+def warning_lines(result: Identification) -> list[str]:
+    """The sentences of :func:`notice_lines`."""
+    return [n.message for n in notice_lines(result)]
 
 
 def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str:
@@ -76,7 +82,7 @@ def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str
     if ms and ms.n > 1:
         out.append("")
         out.append(f"multi-start: {ms.n} starts, best #{ms.best_index}; {ms.message}")
-    out += [f"warning: {w}" for w in warning_lines(result)]
+    out += [n.one_line() for n in notice_lines(result)]
     return "\n".join(out) + "\n"
 
 

@@ -97,7 +97,7 @@ def identification_text(ident: Identification, title: str | None = None) -> str:
                                                     for b, c in ident.curves.items()))
     out += ["", table(FIT_HEAD, _fit_cells(ident)).rstrip()]
     if ident.warnings:
-        out += ["", "warnings:"] + [f"- {short(w)}" for w in ident.warnings[:MAX_WARNINGS]]
+        out += ["", "warnings:"] + [f"- {short(coded(n))}" for n in ident.notices[:MAX_WARNINGS]]
         if len(ident.warnings) > MAX_WARNINGS:
             out.append(_more(len(ident.warnings) - MAX_WARNINGS, "warnings", ".warnings"))
     return "\n".join(out).rstrip() + "\n"
@@ -115,6 +115,11 @@ def html_table(head: list[str], rows: list[list], left: int = 1) -> str:
         return "".join(f"<{tag}>{escape(str(c))}</{tag}>" for c in row)
     return (f"<table class=l{left}><tr>" + cells("th", head) + "</tr>"
             + "".join(f"<tr>{cells('td', r)}</tr>" for r in rows) + "</table>")
+
+
+def coded(notice) -> str:
+    """A warning with its code in front (``[FLOOR001] the discretization floor ...``), bare when it has none."""
+    return f"[{notice.code}] {notice.message}" if notice.code else notice.message
 
 
 def html_list(items, limit: int = MAX_WARNINGS, more: str = "") -> str:
@@ -144,7 +149,7 @@ def identification_html(ident: Identification, title: str | None = None, heading
                                                               for b, c in ident.curves.items())) + "</p>")
     parts.append(f"<{h}>Fit</{h}>" + html_table(FIT_HEAD, _fit_cells(ident), left=2))
     if ident.warnings:
-        parts.append(f"<{h}>Warnings</{h}>" + html_list(ident.warnings, more=".warnings"))
+        parts.append(f"<{h}>Warnings</{h}>" + html_list(map(coded, ident.notices), more=".warnings"))
     return "".join(parts) + "</div>"
 
 
@@ -204,7 +209,7 @@ BEST_HEAD = ["round", "rank", "candidate", "score", "p", "val RMS refitted"]
 
 def _warnings(d: Diagnosis) -> tuple[str, ...]:
     # the final fit's own warnings are listed with its parameters
-    return tuple(w for w in d.warnings if w not in d.identification.warnings)
+    return tuple(coded(n) for n in d.notices if n.message not in d.identification.warnings)
 
 
 def diagnosis_text(d: Diagnosis) -> str:
