@@ -1,8 +1,9 @@
 """Effects at positions: where a position is, the learned spring to ground, and cogging reading the chart's angle.
 
 Oracles: signs derived by hand from the physics (a spring to ground pulls the mass back), hand-written
-equivalent charts, and for the diagnosis a mass on a hardening spring simulated by scipy's solve_ivp
-(tests/smooth_oracle.py: DOP853, rtol 1e-10), not by the network under test.
+equivalent charts; for the diagnosis a mass on a hardening spring to ground (tests/smooth_oracle.py) and a
+two-mass drive with an unbalanced load (written here), both simulated by scipy's solve_ivp (DOP853, rtol
+1e-10), not by the network under test, and the unbalance's amplitude and phase as the oracle drew them.
 """
 
 from __future__ import annotations
@@ -12,11 +13,12 @@ import dataclasses
 import numpy as np
 import pytest
 import smooth_oracle as so
-from diagnose_bench import aprbs_input, chart, simulate
+from diagnose_bench import DATA, aprbs_input, chart, simulate
+from scipy.integrate import solve_ivp
 
 from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.data.csvdata import Dataset
-from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS, Cogging, Spring
+from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS, Cogging, Spring, effect_library, select_effects
 from flowchart2sdnn.diagnose.graph import Place, positions, signal_place, speeds, states
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
 from flowchart2sdnn.diagram.model import NonlinearWeights
@@ -148,3 +150,50 @@ def test_diagnose_finds_the_hardening_spring_at_the_position():
     assert report["accepted"][0]["at"] == "x"
     first = report["rounds"][0]
     assert first["validation_rms_after"] < first["validation_rms_before"] / 4, first
+
+
+# a two-mass drive (the diagnose bench's numbers) whose load carries an unbalance m g l sin(phi2 + phase),
+# spinning at about 30 rad/s: one period a revolution is near 5 Hz, below the 10 Hz shaft resonance
+TMS = {"J1": 0.1912, "J2": 0.3838, "c": 477.2, "d": 0.2406, "b1": 0.05}
+MGL, PHASE, W0 = 1.5, 0.7, 30.0
+
+
+def _drive(n: int, seed: int, noise: float = 0.01) -> Dataset:
+    """The oracle: the drive with the unbalance, solve_ivp (DOP853), started spinning at W0."""
+    rng = np.random.default_rng(seed)
+    f, a, ph = rng.uniform(0.2, 3.0, 12), rng.uniform(0.3, 1.0, 12) / 4, rng.uniform(0, 2 * np.pi, 12)
+
+    def torque(t):
+        return W0 * TMS["b1"] + np.sum(a[:, None] * np.sin(2 * np.pi * f[:, None] * np.atleast_1d(t)[None, :]
+                                                          + ph[:, None]), axis=0)
+
+    def rhs(t, s):
+        w1, w2, dphi, phi2 = s
+        shaft = TMS["c"] * dphi + TMS["d"] * (w1 - w2)
+        return [(torque(t)[0] - shaft - TMS["b1"] * w1) / TMS["J1"],
+                (shaft - MGL * np.sin(phi2 + PHASE)) / TMS["J2"], w1 - w2, w2]
+
+    t = np.arange(n) * 1e-3
+    sol = solve_ivp(rhs, (0, t[-1]), [W0, W0, 0.0, 0.0], t_eval=t, method="DOP853", rtol=1e-10, atol=1e-12)
+    noisy = np.random.default_rng(seed + 1000)
+    cols = {"M1": torque(t), "w1": sol.y[0] + noise * noisy.standard_normal(n),
+            "w2": sol.y[1] + noise * noisy.standard_normal(n)}
+    return Dataset(path=f"drive{seed}.csv", columns=cols, time=t, n_rows=n, sample_time=1e-3, max_step_deviation=0.0,
+                   sha256="", source_columns={k: k for k in cols}, time_column="time")
+
+
+def test_diagnose_finds_the_unbalance_of_the_load_one_period_a_revolution():
+    # the chart of the bench, its speeds started from the data (the drive is spinning); about 8 s
+    text = (DATA / "two_mass_nominal.yaml").read_text()
+    text = text.replace("in: acc1, unit", "in: acc1, init: data, unit").replace("in: acc2, unit", "in: acc2, init: data, unit")
+    effects = select_effects(["cogging", "friction", "damping"], effect_library(harmonics=(1, 2, 6)))
+    report = diagnose(diagram_from_text(text), _drive(2000, 1), [_drive(1300, 2)], DiagnoseSettings(rounds=1),
+                      effects=effects).report
+    assert [(a["effect"], a["at"], a["option"]) for a in report["accepted"]] == [("cogging", "w2", 1)], \
+        report["candidates"][:3]
+    first = report["rounds"][0]
+    assert first["validation_rms_after"] < first["validation_rms_before"] / 4, first
+    # -(A sin phi2 + B cos phi2) = -m g l sin(phi2 + phase): A = mgl cos(phase), B = mgl sin(phase)
+    p = first["parameters"]
+    assert p["cog1_A_w2"] == pytest.approx(MGL * np.cos(PHASE), rel=0.05)
+    assert p["cog1_B_w2"] == pytest.approx(MGL * np.sin(PHASE), rel=0.05)
