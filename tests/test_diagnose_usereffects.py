@@ -246,3 +246,18 @@ def test_an_at_the_chart_lacks_is_reported_at_its_line(tmp_path, attach, message
 def test_attach_signal_needs_an_at(tmp_path):
     with pytest.raises(SdnnError, match="'attach: signal' needs 'at: <signal>'"):
         _effects(tmp_path, CUBIC.format(attach="signal"))
+
+
+def test_the_cli_reports_an_at_the_chart_lacks_before_any_fit(tmp_path):
+    from click.testing import CliRunner
+
+    from flowchart2sdnn.cli import main
+
+    (tmp_path / "c.yaml").write_text(SPRING)
+    (tmp_path / "d.csv").write_text("time,u,x\n" + "".join(f"{i * 0.01:.2f},0,0\n" for i in range(20)))
+    fx = _write(tmp_path, "sdnn_effects: 1\neffects:" + CUBIC.format(attach="null\n    at: q"))
+    res = CliRunner().invoke(main, ["diagnose", str(tmp_path / "c.yaml"), str(tmp_path / "d.csv"),
+                                    "--effects-file", str(fx), "--quiet"])
+    assert res.exit_code == 1 and "Traceback" not in res.output, res.output
+    assert f"{fx}:5" in res.output and "at: 'q' is no signal of the chart" in res.output
+    assert len(res.output.strip().splitlines()) <= 2  # the error and at most its hint
