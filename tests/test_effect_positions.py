@@ -9,6 +9,7 @@ two-mass drive with an unbalanced load (written here), both simulated by scipy's
 from __future__ import annotations
 
 import dataclasses
+import functools
 
 import numpy as np
 import pytest
@@ -21,6 +22,7 @@ from flowchart2sdnn.data.csvdata import Dataset
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS, Cogging, Spring, effect_library, select_effects
 from flowchart2sdnn.diagnose.graph import Place, positions, signal_place, speeds, states
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
+from flowchart2sdnn.diagnose.usereffects import load_effects_file
 from flowchart2sdnn.diagram.model import NonlinearWeights
 from flowchart2sdnn.diagram.validate import diagram_from_text
 
@@ -131,6 +133,7 @@ def test_cogging_reads_the_charts_own_position_of_the_speed():
 
 
 # ------------------------------------------------------------------------------------------------ diagnose
+@functools.cache
 def _record(n: int, seed: int) -> tuple[Dataset, float]:
     """The oracle: m x'' + d x' + k x + k3 x^3 = u(t), solve_ivp, noise 0.1 % of rms(x)."""
     t, u, x, sigma = so.record(n=n, seed=seed, noise=1e-3, params={"k": K, "d": D, "k3": K3}, band=1.0,
@@ -197,3 +200,23 @@ def test_diagnose_finds_the_unbalance_of_the_load_one_period_a_revolution():
     p = first["parameters"]
     assert p["cog1_A_w2"] == pytest.approx(MGL * np.cos(PHASE), rel=0.05)
     assert p["cog1_B_w2"] == pytest.approx(MGL * np.sin(PHASE), rel=0.05)
+
+
+def test_diagnose_accepts_a_user_cubic_spring_read_from_the_position(tmp_path):
+    # the issue's refit: a user effect that reads the position, k3 x^3, here with the oracle's own law (about 4 s)
+    (tmp_path / "fx.yaml").write_text("""sdnn_effects: 1
+effects:
+  cubic:
+    at: x
+    parameters: {"{name}_k3": {init: 0}}
+    blocks:
+      "{name}": {type: product, in: ["{at}", "{at}", "{at}"], k: "{name}_k3"}
+    output: "{name}"
+""")
+    effects = select_effects(["cubic", "damping"], effect_library(user=load_effects_file(tmp_path / "fx.yaml")))
+    report = diagnose(_chart(), _record(1000, 0)[0], [_record(500, 7)[0]], DiagnoseSettings(rounds=1),
+                      effects=effects).report
+    assert [(a["effect"], a["at"]) for a in report["accepted"]] == [("cubic", "x")], report["candidates"][:3]
+    first = report["rounds"][0]
+    assert first["validation_rms_after"] < first["validation_rms_before"] / 4, first
+    assert first["parameters"]["cubic_x_k3"] == pytest.approx(K3, rel=0.05)
