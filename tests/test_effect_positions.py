@@ -113,10 +113,11 @@ def test_a_spring_with_weights_set_equals_a_hand_written_chart():
     np.testing.assert_allclose(simulate(patched, u), simulate(hand, u), rtol=1e-10, atol=1e-10)
 
 
-def test_a_spring_where_the_chart_has_none_carries_a_linear_term():
+def test_a_position_without_a_spring_is_offered_none():
+    # a mass with no spring to ground (EMPS's linear axis): a learned curve of its position is not offered
     bare = diagram_from_text(LINEAR.replace("{extra}", "").replace("{x_in}", "v").replace("-Fk, ", ""))
-    patched = Spring().patch(bare, positions(bare)[0], 1.0)
-    assert patched.block("spring_x").weights.c == 0.0
+    assert [p.at for p in positions(bare)] == ["x"] and Spring().places(bare) == ()
+    assert [p.at for p in Spring().places(_chart())] == ["x"]
 
 
 # ------------------------------------------------------------------------------------------------ cogging

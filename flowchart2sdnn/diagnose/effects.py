@@ -33,8 +33,8 @@ dead_zone      spring angle        c*x becomes c*(x - g*sat(x/g)): exact backlas
 cogging        speed               A sin(p phi) + B cos(p phi) (A = B = 0) in the sum, phi the speed's position
                                    in the chart or a new integral of it; p = 1 an unbalance (p with a period
                                    beyond 2 RMS of a position the chart has: not offered) (:mod:`.positions`)
-spring         position            an odd learned curve of the position (v = 0) against it in its speed's
-                                   sum: a nonlinear spring to ground (:mod:`.positions`)
+spring         position (sprung)   k*x to ground becomes k*x + an odd learned curve of x (v = 0) in its speed's
+                                   sum: a hardening or softening spring (:mod:`.positions`)
 overflow       integrator state    x' = f - K relu(x - L): x held at a learned level L (or above a lower one),
                                    the excess lost or routed into a downstream integrator (:mod:`.overflow`)
 input_offset   input               the physics reads u + o (o = 0): an input's zero offset (:mod:`.lawterms`)

@@ -3,10 +3,13 @@
 A position is an integrator of one speed (:func:`.graph.positions`); a machine whose chart has no position
 block still has an angle, the integral of its speed, which a periodic torque integrates for itself.
 
-* ``spring`` at a position x: a force ``f(x)``, an odd learned curve (the tanh basis of diagram.curves over
-  x's range, flat at the start: neutral) entered in the torque sums of x's speed against x. With a linear
-  spring ``k x`` already in the sum the curve has no linear term of its own (k is that), so it bends ``k x``
-  into a hardening or softening spring; without one it is the whole spring.
+* ``spring`` at a position x whose chart has a spring to ground (a parameter gain ``k x`` in the torque
+  sum of x's speed): a force ``f(x)``, an odd learned curve (the tanh basis of diagram.curves over x's
+  range, flat at the start: neutral) entered in that sum against x. The curve has no linear term of its own
+  (k is that): it bends ``k x`` into a hardening or softening spring, as backlash bends a shaft's. A position
+  without a spring is not offered one: on EMPS (a linear axis, 0.25 m of travel) a learned curve of the
+  position took the place of the friction the axis has (any smooth function of a position that travels
+  little fits part of anything); a user effect with ``attach: position`` states a spring there.
 * ``cogging`` at a speed: ``A sin(p phi) + B cos(p phi)`` (A = B = 0: neutral), phi the chart's position of
   that speed when it has one (an encoder's angle started from the data keeps its true phase in every
   record), else a new integral of the speed. p = 1 is one period per revolution: the unbalance of a load,
@@ -26,6 +29,7 @@ from .graph import (
     Place,
     add_blocks,
     add_terms,
+    consumers,
     curve_block,
     namer,
     position_of,
@@ -38,16 +42,23 @@ from .graph import (
 __all__ = ["Spring", "Cogging"]
 
 
+def _has_spring(diagram: Diagram, place: Place) -> bool:
+    """Whether the position feeds a parameter gain that enters one of its speed's torque sums."""
+    sums = {s for s, _ in place.sums}
+    return any(g.kind == "gain" and not g.k.is_constant and any(c.name in sums for c in consumers(diagram, g.name))
+               for g in consumers(diagram, place.at))
+
+
 @dataclass(frozen=True)
 class Spring:
-    """A learned spring to ground at a position: ``f(x) = sum v_i tanh(a_i x)`` (odd, v = 0) against x."""
+    """A spring to ground bent by a learned curve: ``k x + sum v_i tanh(a_i x)`` (odd, v = 0) against x."""
 
     name: str = "spring"
     neutral: bool = True
     extra_dof: int = 0
 
     def places(self, diagram: Diagram) -> tuple[Place, ...]:
-        return positions(diagram)
+        return tuple(p for p in positions(diagram) if _has_spring(diagram, p))
 
     def options(self, diagram: Diagram, place: Place, scales) -> tuple:
         return (scales.span(place.at),)
@@ -59,7 +70,7 @@ class Spring:
         return seat_curve(add_terms(add_blocks(diagram, [block]), sum_terms(place, name)), name)
 
     def describe(self) -> str:
-        return "spring: a learned odd curve of a position against it (a nonlinear spring to ground)"
+        return "spring: a spring to ground k*x plus a learned odd curve of the position (hardening, softening)"
 
     def label(self, option) -> str:
         return ""
