@@ -148,7 +148,6 @@ class Effect(Protocol):
     def label(self, option) -> str: ...
 
 
-_sum_terms, _curve, _seat_curve = sum_terms, curve_block, seat_curve
 _namer = namer  # fresh names for a patch's new blocks and parameters
 
 
@@ -269,8 +268,8 @@ class Friction:
             return (self.physical or Coulomb()).patch(diagram, place, option.scale)
         span = float(option) if option else 1.0
         name = fresh_name(diagram, f"fric_{place.at}")
-        block = _curve(name, place.at, span, f"friction of {place.at} (diagnose)")
-        return _seat_curve(add_terms(add_blocks(diagram, [block]), _sum_terms(place, name)), name)
+        block = curve_block(name, place.at, span, f"friction of {place.at} (diagnose)")
+        return seat_curve(add_terms(add_blocks(diagram, [block]), sum_terms(place, name)), name)
 
     def describe(self) -> str:
         text = "friction: a learned curve of a speed (the tanh basis over its range) against the motion"
@@ -308,7 +307,7 @@ class Damping:
         p = Parameter(pname, 0.0, min=0.0, description=f"viscous damping of {place.at} (diagnose)")
         block = Block(name, "gain", (Term(place.at),), k=parse_expr(pname),
                       description=f"viscous damping of {place.at} (diagnose)")
-        return add_terms(add_blocks(diagram, [block], [p]), _sum_terms(place, name))
+        return add_terms(add_blocks(diagram, [block], [p]), sum_terms(place, name))
 
     def describe(self) -> str:
         return "damping: a viscous gain with a new parameter on a speed or a speed difference"
@@ -576,7 +575,7 @@ class Backlash:
         spring = diagram.block(place.via)
         lin = fresh_name(diagram, f"{spring.name}_lin")
         curve = fresh_name(diagram, f"bl_{place.at}", {lin})
-        block = _curve(curve, place.at, span, f"backlash of {place.at} (diagnose)")
+        block = curve_block(curve, place.at, span, f"backlash of {place.at} (diagnose)")
         blocks = []
         for b in diagram.blocks:
             if b.name == spring.name:
@@ -585,7 +584,7 @@ class Backlash:
                                     description="spring torque with backlash (diagnose)"))
             else:
                 blocks.append(b)
-        return _seat_curve(add_blocks(replace(diagram, blocks=tuple(blocks)), [block]), curve)
+        return seat_curve(add_blocks(replace(diagram, blocks=tuple(blocks)), [block]), curve)
 
     def describe(self) -> str:
         return "backlash: the spring torque becomes c*x plus a learned odd curve of the shaft angle"
