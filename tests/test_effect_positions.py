@@ -19,7 +19,14 @@ from scipy.integrate import solve_ivp
 
 from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.data.csvdata import Dataset
-from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS, Cogging, Spring, effect_library, select_effects
+from flowchart2sdnn.diagnose.effects import (
+    BUILTIN_EFFECTS,
+    Cogging,
+    Scales,
+    Spring,
+    effect_library,
+    select_effects,
+)
 from flowchart2sdnn.diagnose.graph import Place, positions, signal_place, speeds, states
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
 from flowchart2sdnn.diagnose.usereffects import load_effects_file
@@ -221,3 +228,15 @@ effects:
     first = report["rounds"][0]
     assert first["validation_rms_after"] < first["validation_rms_before"] / 4, first
     assert first["parameters"]["cubic_x_k3"] == pytest.approx(K3, rel=0.05)
+
+
+def test_one_period_a_revolution_stays_on_offer_at_an_angle_that_only_swings():
+    # a position of 0.3 rms: 2 pi / p <= 0.6 keeps p >= 10.5 (the travel rule); on an angle (rad) p = 1 stays, the
+    # law of an unbalance m g l sin(phi + phase); on a length (m) it goes, as on EMPS
+    cog = Cogging(harmonics=(1, 2, 12))
+    swing = Scales({"x": 0.3})
+    for unit, expected in (("rad", (1, 12)), ("m", (12,)), (None, (12,))):
+        text = LINEAR.replace("{extra}", "").replace("{x_in}", "v").replace(", unit: m}", "}" if unit is None
+                                                                              else f", unit: {unit}}}")
+        lin = diagram_from_text(text)
+        assert cog.options(lin, speeds(lin)[0], swing) == expected, unit

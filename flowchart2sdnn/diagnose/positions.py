@@ -85,6 +85,8 @@ class Cogging:
     whose output is its position), harmonics whose period ``2 pi / p`` is longer than twice the RMS of that
     position are not offered: over less than about one period a "periodic" torque is only a smooth function
     of the position (on EMPS, p = 1..3 rad/m over 0.25 m of travel fitted amplitudes of 1 kN that cancel).
+    Except p = 1 on an angle (unit rad): one period a revolution is the law of an unbalance, m g l sin(phi +
+    phase), whose A and B are the physical m g l and zero angle even where the load only swings.
     """
 
     harmonics: tuple[int, ...] = (1, 2, 3, 4, 6, 8, 12)
@@ -97,11 +99,13 @@ class Cogging:
         return speeds(diagram)
 
     def options(self, diagram: Diagram, place: Place, scales) -> tuple:
-        spans = [float(scales.rms[b.name]) for b in diagram.blocks
-                 if b.kind == "integrator" and b.inputs == (Term(place.at),) and b.name in scales.rms]
+        own = [b for b in diagram.blocks if b.kind == "integrator" and b.inputs == (Term(place.at),)]
+        spans = [float(scales.rms[b.name]) for b in own if b.name in scales.rms]
         if not spans:
             return tuple(self.harmonics)
-        return tuple(p for p in self.harmonics if 2 * math.pi / p <= 2 * max(spans))
+        units = {s.name: s.unit for s in diagram.outputs}
+        angle = any((b.unit or units.get(b.name)) == "rad" for b in own)
+        return tuple(p for p in self.harmonics if 2 * math.pi / p <= 2 * max(spans) or (p == 1 and angle))
 
     def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
         p = int(option) if option is not None else 1
