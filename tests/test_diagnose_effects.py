@@ -218,7 +218,7 @@ def test_damping_starts_at_its_lower_bound_zero():
 
 def test_the_registry_names_and_selection():
     assert set(BUILTIN_EFFECTS) == {"friction", "damping", "dead_time", "saturation", "backlash", "dead_zone",
-                                    "cogging", "overflow", "sensor_limit", "sensor_offset", "input_offset",
+                                    "cogging", "spring", "overflow", "sensor_limit", "sensor_offset", "input_offset",
                                     "linear_term"}
     assert [e.name for e in select_effects(["dead_time", " friction"], BUILTIN_EFFECTS)] == ["dead_time", "friction"]
     with pytest.raises(SdnnError, match="did you mean 'friction'"):

@@ -146,3 +146,118 @@ effects:
     np.testing.assert_allclose(simulate(drag, u), simulate(hand_drag, u), atol=1e-12)
     np.testing.assert_allclose(simulate(loaded, u), simulate(hand_loaded, u), atol=1e-12)
     assert not np.allclose(simulate(drag, u), simulate(ONE, u))  # the effect acts
+
+
+# ------------------------------------------------------------------------------------------------ positions, signals
+SPRING = """
+sdnn: 1
+name: spring
+sample_time: 0.01
+inputs: {u: {}}
+outputs: {x: {}}
+parameters: {m: {init: 1.0, fixed: true}, k: {init: 150}, d: {init: 1.2}}
+blocks:
+  F:  {type: sum, in: [u, -Fk, -Fd]}
+  a:  {type: gain, in: F, k: 1/m}
+  v:  {type: integrator, in: a}
+  x:  {type: integrator, in: v}
+  Fk: {type: gain, in: x, k: k}
+  Fd: {type: gain, in: v, k: d}
+"""
+CUBIC = """
+  cubic:
+    attach: {attach}
+    parameters: {{"{{name}}_k3": {{init: 0}}}}
+    blocks:
+      "{{name}}": {{type: product, in: ["{{at}}", "{{at}}", "{{at}}"], k: "{{name}}_k3"}}
+    output: "{{name}}"
+"""
+
+
+def _effects(tmp_path, body: str):
+    return load_effects_file(_write(tmp_path, "sdnn_effects: 1\neffects:" + body))
+
+
+@pytest.mark.parametrize("attach", ["position", "position\n    at: x", "null\n    at: x"])
+def test_an_effect_at_a_position_is_a_force_against_it(tmp_path, attach):
+    # the issue's user effect: a cubic spring k3 x^3; oracle: the chart with the cubic written by hand
+    chart = diagram_from_text(SPRING)
+    effect = _effects(tmp_path, CUBIC.format(attach=attach))["cubic"]
+    (place,) = effect.places(chart)
+    assert (place.at, place.kind) == ("x", "position")
+    patched = effect.patch(chart, place, None)
+    u = aprbs_input(1500, seed=3, amplitude=100.0)
+    np.testing.assert_allclose(simulate(patched, u), simulate(chart, u), atol=1e-12)  # neutral
+    hand = diagram_from_text(SPRING.replace("-Fd]", "-Fd, -C]") + "  C: {type: product, in: [x, x, x], k: 40}\n")
+    np.testing.assert_allclose(simulate(_set(patched, "cubic_x_k3", 40.0), u), simulate(hand, u), rtol=1e-10,
+                               atol=1e-10)
+
+
+def test_an_effect_at_a_named_signal_reroutes_its_readers(tmp_path):
+    # a spring force 10 % off: every reader of Fk reads Fk (1 + g); oracle: the chart with k scaled by hand
+    effect = _effects(tmp_path, """
+  force_error:
+    attach: signal
+    at: Fk
+    parameters: {"{name}_g": {init: 0}}
+    blocks:
+      "{name}_d": {type: gain, in: "{at}", k: "{name}_g"}
+      "{name}":   {type: sum, in: ["{at}", "{name}_d"]}
+    output: "{name}"
+""")["force_error"]
+    chart = diagram_from_text(SPRING)
+    (place,) = effect.places(chart)
+    patched = _set(effect.patch(chart, place, None), "force_error_Fk_g", 0.1)
+    u = aprbs_input(1500, seed=4, amplitude=100.0)
+    np.testing.assert_allclose(simulate(patched, u), simulate(_set(chart, "k", 165.0), u), rtol=1e-9, atol=1e-10)
+
+
+def test_an_effect_at_a_state_leaks_from_its_integrand(tmp_path):
+    # x' = v - r x: oracle, the leak written by hand
+    effect = _effects(tmp_path, """
+  leak:
+    attach: state
+    at: x
+    parameters: {"{name}_r": {init: 0}}
+    blocks:
+      "{name}": {type: gain, in: "{at}", k: "{name}_r"}
+    output: "{name}"
+""")["leak"]
+    chart = diagram_from_text(SPRING)
+    patched = _set(effect.patch(chart, effect.places(chart)[0], None), "leak_x_r", 2.0)
+    hand = diagram_from_text(SPRING.replace("x:  {type: integrator, in: v}", "x:  {type: integrator, in: xi}")
+                             + "  L: {type: gain, in: x, k: 2}\n  xi: {type: sum, in: [v, -L]}\n")
+    u = aprbs_input(1500, seed=5, amplitude=100.0)
+    np.testing.assert_allclose(simulate(patched, u), simulate(hand, u), rtol=1e-10, atol=1e-10)
+
+
+@pytest.mark.parametrize("attach,message", [
+    ("position\n    at: v", "at: 'v' is no position of the chart (its positions: x)"),
+    ("null\n    at: q", "at: 'q' is no signal of the chart"),
+])
+def test_an_at_the_chart_lacks_is_reported_at_its_line(tmp_path, attach, message):
+    effect = _effects(tmp_path, CUBIC.format(attach=attach))["cubic"]
+    with pytest.raises(SdnnError) as err:
+        effect.places(diagram_from_text(SPRING))
+    d = err.value.diagnostics[0]
+    assert message in d.message and d.location.line == 5  # the line of `at:`
+
+
+def test_attach_signal_needs_an_at(tmp_path):
+    with pytest.raises(SdnnError, match="'attach: signal' needs 'at: <signal>'"):
+        _effects(tmp_path, CUBIC.format(attach="signal"))
+
+
+def test_the_cli_reports_an_at_the_chart_lacks_before_any_fit(tmp_path):
+    from click.testing import CliRunner
+
+    from flowchart2sdnn.cli import main
+
+    (tmp_path / "c.yaml").write_text(SPRING)
+    (tmp_path / "d.csv").write_text("time,u,x\n" + "".join(f"{i * 0.01:.2f},0,0\n" for i in range(20)))
+    fx = _write(tmp_path, "sdnn_effects: 1\neffects:" + CUBIC.format(attach="null\n    at: q"))
+    res = CliRunner().invoke(main, ["diagnose", str(tmp_path / "c.yaml"), str(tmp_path / "d.csv"),
+                                    "--effects-file", str(fx), "--quiet"])
+    assert res.exit_code == 1 and "Traceback" not in res.output, res.output
+    assert f"{fx}:5" in res.output and "at: 'q' is no signal of the chart" in res.output
+    assert len(res.output.strip().splitlines()) <= 2  # the error and at most its hint

@@ -14,7 +14,7 @@ cogging            speed          A sin(p phi + phase), p in 2..12      cogging
 unbalance          load speed     -m g l sin(phi + phase)               cogging (its p = 1 term is this torque)
 backlash           shaft angle    c (x - g sat(x / g)), half gap g      backlash, dead_zone
 nonlinear_spring   shaft angle    c x + c3 x^3                          backlash (an odd curve of the angle)
-                   ground phi1    k x + k3 x^3                          nothing: the library has no place there
+                   ground phi1    k x + k3 x^3                          spring (an odd curve of the position)
 dead_time          input          n-sample delay                        dead_time
 input_lag          input          first-order lag tau (current loop)    dead_time (the nearest library effect)
 saturation         input          L sat(u / L)                          saturation
@@ -86,7 +86,7 @@ def accepted_answers(kind: str, place: str) -> tuple[tuple[str, str], ...]:
     if kind == "backlash":
         return (("backlash", place), ("dead_zone", place))
     if kind == "nonlinear_spring":
-        return (("backlash", place),) if place.startswith("dphi") else ()
+        return (("backlash", place),) if place.startswith("dphi") else (("spring", place),)
     if kind == "input_lag":
         return (("dead_time", place),)
     return ((kind, place),)

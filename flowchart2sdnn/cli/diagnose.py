@@ -171,6 +171,8 @@ def diagnose(paths, diagram, validation, split, output, report_path, rounds, eff
         raise click.UsageError(f"{effects_file}: {exc}") from None
     effects = select_effects(parse_effects(effect_names), library)
     diagram = with_intersample(with_substeps(load_diagram(chart), substeps), intersample)
+    for effect in effects:  # a user effect's `at:` the chart lacks is an error now, not after the first fit
+        effect.places(diagram)
     maps, scales = column_reading(diagram, mapping, units)
     dialect = (delimiter, decimal, resample)
     train = read_records(data, diagram, maps, scales, *dialect)

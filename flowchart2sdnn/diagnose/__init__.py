@@ -15,7 +15,7 @@ import importlib
 _WHERE = {
     **dict.fromkeys(("BUILTIN_EFFECTS", "Backlash", "Cogging", "Damping", "DeadTime", "DeadZone", "Effect",
                      "Friction", "InputOffset", "LinearTerm", "Saturation", "Scales", "SensorLimit",
-                     "SensorOffset"), "effects"),
+                     "SensorOffset", "Spring"), "effects"),
     "Place": "graph",
     **dict.fromkeys(("DiagnoseSettings", "Fitted", "diagnose"), "loop"),
     "Diagnosis": "result",
@@ -54,6 +54,7 @@ __all__ = [
     "SensorLimit",
     "SensorOffset",
     "Screen",
+    "Spring",
     "YamlEffect",
     "diagnose",
     "gauss_newton_decrease",

@@ -30,8 +30,11 @@ sensor_limit   output              the same clip on a measured output (a sensor 
 sensor_offset  output (read)       the physics reads the measured output + o (o = 0): a sensor's zero offset
 backlash       spring angle        c*x becomes c*x + an odd learned curve (v = 0) of x (a dead zone is learnable)
 dead_zone      spring angle        c*x becomes c*(x - g*sat(x/g)): exact backlash of half gap g (scanned)
-cogging        speed               phi = integral(speed); A sin(p phi) + B cos(p phi) (A = B = 0) in the sum
-                                   (p with a period beyond 2 RMS of a position the chart has: not offered)
+cogging        speed               A sin(p phi) + B cos(p phi) (A = B = 0) in the sum, phi the speed's position
+                                   in the chart or a new integral of it; p = 1 an unbalance (p with a period
+                                   beyond 2 RMS of a position the chart has: not offered) (:mod:`.positions`)
+spring         position (sprung)   k*x to ground becomes k*x + an odd learned curve of x (v = 0) in its speed's
+                                   sum: a hardening or softening spring (:mod:`.positions`)
 overflow       integrator state    x' = f - K relu(x - L): x held at a learned level L (or above a lower one),
                                    the excess lost or routed into a downstream integrator (:mod:`.overflow`)
 input_offset   input               the physics reads u + o (o = 0): an input's zero offset (:mod:`.lawterms`)
@@ -47,7 +50,6 @@ from collections.abc import Mapping, Sequence
 from dataclasses import dataclass, field, replace
 from typing import Protocol, runtime_checkable
 
-from ..diagram.curves import BASIS_FUNCTIONS, basis_weights
 from ..diagram.model import Block, Diagram, Parameter, Term
 from ..errors import SdnnError, did_you_mean
 from ..expr import parse_expr
@@ -55,18 +57,22 @@ from .graph import (
     Place,
     add_blocks,
     add_terms,
+    curve_block,
     fresh_name,
     input_places,
     namer,
     output_places,
     rename_block,
     reroute,
+    seat_curve,
     speed_differences,
     speeds,
     spring_angles,
+    sum_terms,
 )
 from .lawterms import InputOffset, LinearTerm
 from .overflow import Overflow
+from .positions import Cogging, Spring
 
 __all__ = [
     "Scales",
@@ -82,6 +88,7 @@ __all__ = [
     "Backlash",
     "DeadZone",
     "Cogging",
+    "Spring",
     "Overflow",
     "LinearTerm",
     "InputOffset",
@@ -139,27 +146,6 @@ class Effect(Protocol):
     def describe(self) -> str: ...
 
     def label(self, option) -> str: ...
-
-
-def _sum_terms(place: Place, signal: str) -> dict[str, tuple[Term, ...]]:
-    terms: dict[str, tuple[Term, ...]] = {}
-    for s, sign in place.sums:
-        terms[s] = terms.get(s, ()) + (Term(signal, sign),)
-    return terms
-
-
-def _curve(name: str, at: str, span: float, description: str) -> Block:
-    """A learned curve of `at` (the tanh basis over +-span, diagram.curves) whose weights are set once it sits in
-    its chart (:func:`_seat_curve`: whether it has a linear term depends on what it is summed with)."""
-    return Block(name, "nonlinear", (Term(at),), description=description, neurons=BASIS_FUNCTIONS, basis="tanh",
-                 span=span)
-
-
-def _seat_curve(diagram: Diagram, name: str) -> Diagram:
-    """The chart with curve `name` flat (v = 0, c = 0: neutral) over its span."""
-    return replace(diagram, blocks=tuple(
-        replace(b, weights=basis_weights(diagram, b, b.span or 1.0)) if b.name == name else b
-        for b in diagram.blocks))
 
 
 _namer = namer  # fresh names for a patch's new blocks and parameters
@@ -282,8 +268,8 @@ class Friction:
             return (self.physical or Coulomb()).patch(diagram, place, option.scale)
         span = float(option) if option else 1.0
         name = fresh_name(diagram, f"fric_{place.at}")
-        block = _curve(name, place.at, span, f"friction of {place.at} (diagnose)")
-        return _seat_curve(add_terms(add_blocks(diagram, [block]), _sum_terms(place, name)), name)
+        block = curve_block(name, place.at, span, f"friction of {place.at} (diagnose)")
+        return seat_curve(add_terms(add_blocks(diagram, [block]), sum_terms(place, name)), name)
 
     def describe(self) -> str:
         text = "friction: a learned curve of a speed (the tanh basis over its range) against the motion"
@@ -321,7 +307,7 @@ class Damping:
         p = Parameter(pname, 0.0, min=0.0, description=f"viscous damping of {place.at} (diagnose)")
         block = Block(name, "gain", (Term(place.at),), k=parse_expr(pname),
                       description=f"viscous damping of {place.at} (diagnose)")
-        return add_terms(add_blocks(diagram, [block], [p]), _sum_terms(place, name))
+        return add_terms(add_blocks(diagram, [block], [p]), sum_terms(place, name))
 
     def describe(self) -> str:
         return "damping: a viscous gain with a new parameter on a speed or a speed difference"
@@ -589,7 +575,7 @@ class Backlash:
         spring = diagram.block(place.via)
         lin = fresh_name(diagram, f"{spring.name}_lin")
         curve = fresh_name(diagram, f"bl_{place.at}", {lin})
-        block = _curve(curve, place.at, span, f"backlash of {place.at} (diagnose)")
+        block = curve_block(curve, place.at, span, f"backlash of {place.at} (diagnose)")
         blocks = []
         for b in diagram.blocks:
             if b.name == spring.name:
@@ -598,7 +584,7 @@ class Backlash:
                                     description="spring torque with backlash (diagnose)"))
             else:
                 blocks.append(b)
-        return _seat_curve(add_blocks(replace(diagram, blocks=tuple(blocks)), [block]), curve)
+        return seat_curve(add_blocks(replace(diagram, blocks=tuple(blocks)), [block]), curve)
 
     def describe(self) -> str:
         return "backlash: the spring torque becomes c*x plus a learned odd curve of the shaft angle"
@@ -607,64 +593,10 @@ class Backlash:
         return ""
 
 
-@dataclass(frozen=True)
-class Cogging:
-    """A position-periodic torque ``A sin(p phi) + B cos(p phi)``, ``phi`` the integral of the speed.
-
-    When the chart already integrates the speed into a position (``q = integral(w)``, e.g. a linear axis
-    whose output is its position), harmonics whose period ``2 pi / p`` is longer than twice the RMS of that
-    position are not offered: over less than about one period a "periodic" torque is only a smooth function
-    of the position (on EMPS, p = 1..3 rad/m over 0.25 m of travel fitted amplitudes of 1 kN that cancel).
-    """
-
-    harmonics: tuple[int, ...] = (1, 2, 3, 4, 6, 8, 12)
-    name: str = "cogging"
-    neutral: bool = True
-    extra_dof: int = 1  # p is chosen too
-    repeatable: bool = True  # harmonics of one place add up
-
-    def places(self, diagram: Diagram) -> tuple[Place, ...]:
-        return speeds(diagram)
-
-    def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
-        spans = [float(scales.rms[b.name]) for b in diagram.blocks
-                 if b.kind == "integrator" and b.inputs == (Term(place.at),) and b.name in scales.rms]
-        if not spans:
-            return tuple(self.harmonics)
-        return tuple(p for p in self.harmonics if 2 * math.pi / p <= 2 * max(spans))
-
-    def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
-        p = int(option) if option is not None else 1
-        w = place.at
-        new = _namer(diagram)
-
-        pa, pb = new(f"cog{p}_A_{w}"), new(f"cog{p}_B_{w}")
-        phi, s, c = new(f"phi_{w}"), new(f"cog{p}_sin_{w}"), new(f"cog{p}_cos_{w}")
-        ga, gb, out = new(f"cog{p}_As_{w}"), new(f"cog{p}_Bc_{w}"), new(f"cog{p}_{w}")
-        unit = next((b.unit for b in diagram.blocks if b.name == place.sums[0][0]), None) if place.sums else None
-        params = [Parameter(pa, 0.0, unit=unit, description=f"cogging sine amplitude, harmonic {p} (diagnose)"),
-                  Parameter(pb, 0.0, unit=unit, description=f"cogging cosine amplitude, harmonic {p} (diagnose)")]
-        blocks = [
-            Block(phi, "integrator", (Term(w),), init=0.0, description=f"angle of {w} (diagnose)"),
-            Block(s, "function", (Term(phi),), k=parse_expr(p), f="sin"),
-            Block(c, "function", (Term(phi),), k=parse_expr(p), f="cos"),
-            Block(ga, "gain", (Term(s),), k=parse_expr(pa)),
-            Block(gb, "gain", (Term(c),), k=parse_expr(pb)),
-            Block(out, "sum", (Term(ga), Term(gb)), unit=unit, description=f"cogging torque of {w} (diagnose)"),
-        ]
-        return add_terms(add_blocks(diagram, blocks, params), _sum_terms(place, out))
-
-    def describe(self) -> str:
-        return f"cogging: A sin(p phi) + B cos(p phi) of the angle of a speed, p in {list(self.harmonics)}"
-
-    def label(self, option) -> str:
-        return f"p={int(option)}"
-
-
 # ------------------------------------------------------------------------------------------------ registry
 BUILTIN_EFFECTS: dict[str, Effect] = {
     e.name: e for e in (Friction(), Damping(), DeadTime(), Saturation(), Backlash(), DeadZone(), Cogging(),
-                        Overflow(), SensorLimit(), SensorOffset(), InputOffset(), LinearTerm())
+                        Spring(), Overflow(), SensorLimit(), SensorOffset(), InputOffset(), LinearTerm())
 }
 
 

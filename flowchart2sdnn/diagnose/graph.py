@@ -9,7 +9,11 @@ The chart IR knows blocks and terms, not physics; these functions read the physi
 * a **spring angle** is an integrator of a speed difference whose output feeds a parameter gain (the spring
   ``MC = c * dphi``) that acts in torque sums;
 * the **sign** of a torque sum for a speed is the sign with which a term entering that sum accelerates the
-  speed (the product of the gains' signs at the parameters' initial values), so that friction opposes motion.
+  speed (the product of the gains' signs at the parameters' initial values), so that friction opposes motion;
+* a **position** is an integrator of one speed (``x = integral(v)``, an angle ``phi = integral(w)``): a force
+  of it enters the speed's torque sums, with the sign that pulls the position back when the force grows with
+  it (a spring to ground). The integral of a speed difference is a spring angle, not a position;
+* a **state** is any integrator; a **signal** any block's output or input, named by the user.
 
 Nothing here mutates: every helper returns a new :class:`Diagram`.
 """
@@ -18,6 +22,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass, replace
 
+from ..diagram.curves import BASIS_FUNCTIONS, basis_weights
 from ..diagram.model import RESERVED, Block, Diagram, Parameter, Term
 from ..expr import ExprError
 
@@ -27,6 +32,13 @@ __all__ = [
     "speed_differences",
     "spring_angles",
     "input_places",
+    "positions",
+    "position_of",
+    "states",
+    "signal_place",
+    "sum_terms",
+    "curve_block",
+    "seat_curve",
     "fresh_name",
     "namer",
     "add_terms",
@@ -43,15 +55,15 @@ class Place:
     Attributes
     ----------
     at : str
-        The signal the effect acts on (the report's `at`): a speed, a speed difference, a spring angle or an
-        input.
+        The signal the effect acts on (the report's `at`): a speed, a speed difference, a spring angle, a
+        position, a state, an input or any named signal.
     kind : str
-        "speed", "speed_difference", "spring_angle", "input", "output" or "state".
+        "speed", "speed_difference", "spring_angle", "position", "input", "output", "state" or "signal".
     sums : tuple of (str, int)
         Torque sums a new torque enters and the sign that *opposes* the motion there (-1 for the usual
-        ``MB = M - friction``). Empty for inputs.
+        ``MB = M - friction``); for a position, the sign that pulls it back. Empty for inputs.
     via : str or None
-        The block an effect rewrites: the spring gain of a spring angle.
+        The block an effect rewrites: the spring gain of a spring angle; the speed a position integrates.
     """
 
     at: str
@@ -142,6 +154,42 @@ def spring_angles(diagram: Diagram) -> tuple[Place, ...]:
     return tuple(out)
 
 
+def positions(diagram: Diagram) -> tuple[Place, ...]:
+    """Integrators of one speed (``x = integral(+-v)``) with the speed's torque sums: a force ``f(x)`` entered
+    with these signs acts against x as a spring to ground does (x grows with +-v, so the sign is the speed's
+    times the term's)."""
+    speed = {p.at: p.sums for p in speeds(diagram)}
+    out = []
+    for b in diagram.blocks:
+        if b.kind == "integrator" and len(b.inputs) == 1 and b.inputs[0].signal in speed:
+            t = b.inputs[0]
+            out.append(Place(b.name, "position", tuple((s, sign * t.sign) for s, sign in speed[t.signal]),
+                             via=t.signal))
+    return tuple(out)
+
+
+def position_of(diagram: Diagram, speed: str) -> str | None:
+    """The chart's own position of `speed` (an integrator reading exactly it), if it has one."""
+    return next((p.at for p in positions(diagram) if p.via == speed), None)
+
+
+def states(diagram: Diagram) -> tuple[Place, ...]:
+    """Every integrator."""
+    return tuple(Place(b.name, "state") for b in diagram.blocks if b.kind == "integrator")
+
+
+def signal_place(diagram: Diagram, signal: str) -> Place:
+    """The place of a named signal: as the most specific kind it is (a speed with its torque sums, a position,
+    ...), else a plain "signal" place (an input or any block). KeyError when the chart has no such signal."""
+    if signal not in set(diagram.block_names) | set(diagram.input_names):
+        raise KeyError(signal)
+    for find in (speeds, speed_differences, spring_angles, positions, input_places, states):
+        place = next((p for p in find(diagram) if p.at == signal), None)
+        if place is not None:
+            return place
+    return Place(signal, "signal")
+
+
 def input_places(diagram: Diagram) -> tuple[Place, ...]:
     return tuple(Place(s.name, "input") for s in diagram.inputs)
 
@@ -152,6 +200,28 @@ def output_places(diagram: Diagram) -> tuple[Place, ...]:
 
 
 # ---------------------------------------------------------------------------------------------- rewiring
+def sum_terms(place: Place, signal: str) -> dict[str, tuple[Term, ...]]:
+    """`signal` as an operand of each of the place's torque sums, with the place's sign (for :func:`add_terms`)."""
+    terms: dict[str, tuple[Term, ...]] = {}
+    for s, sign in place.sums:
+        terms[s] = terms.get(s, ()) + (Term(signal, sign),)
+    return terms
+
+
+def curve_block(name: str, at: str, span: float, description: str) -> Block:
+    """A learned curve of `at` (the tanh basis over +-span, diagram.curves) whose weights are set once it sits in
+    its chart (:func:`seat_curve`: whether it has a linear term depends on what it is summed with)."""
+    return Block(name, "nonlinear", (Term(at),), description=description, neurons=BASIS_FUNCTIONS, basis="tanh",
+                 span=span)
+
+
+def seat_curve(diagram: Diagram, name: str) -> Diagram:
+    """The chart with curve `name` flat (v = 0, c = 0: neutral) over its span."""
+    return replace(diagram, blocks=tuple(
+        replace(b, weights=basis_weights(diagram, b, b.span or 1.0)) if b.name == name else b
+        for b in diagram.blocks))
+
+
 def fresh_name(diagram: Diagram, base: str, taken: set[str] | frozenset[str] = frozenset()) -> str:
     """`base`, or `base_2`, `base_3`, ... : a name no signal or parameter of the chart uses yet."""
     used = set(diagram.block_names) | set(diagram.input_names) | set(diagram.parameter_names) | set(taken)

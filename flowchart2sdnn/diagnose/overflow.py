@@ -27,7 +27,7 @@ from dataclasses import dataclass, replace
 
 from ..diagram.model import Block, Diagram, Parameter, Term
 from ..expr import parse_expr
-from .graph import Place, add_blocks, add_terms, fresh_name
+from .graph import Place, add_blocks, add_terms, fresh_name, states
 
 __all__ = ["Overflow", "Level", "integrators", "downstream"]
 
@@ -50,8 +50,7 @@ class Level:
         return text + (f"->{self.into}" if self.into else "")
 
 
-def integrators(diagram: Diagram) -> tuple[Place, ...]:
-    return tuple(Place(b.name, "state") for b in diagram.blocks if b.kind == "integrator")
+integrators = states  # every integrator: the places of an overflow
 
 
 def _integrand_terms(diagram: Diagram, name: str) -> dict[str, int]:

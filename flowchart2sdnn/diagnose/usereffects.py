@@ -6,7 +6,9 @@ Format (``sdnn_effects: 1``)::
     effects:
       stiction:
         description: a static friction torque F*sign_smooth(w) against the motion
-        attach: speed                # speed | speed_difference | spring_angle | input
+        attach: speed                # speed | speed_difference | spring_angle | position | state | input |
+                                     # signal
+        at: w2                       # optional: only this signal of the chart (required for signal)
         parameters:
           "{name}_F": {init: 0, unit: N*m}
         blocks:
@@ -22,9 +24,15 @@ the effect attaches to, ``{name}`` a fresh prefix for new names (``<effect>_<at>
 the first torque sum of a speed, ``{spring}`` the spring gain of a spring angle.
 
 What ``output`` does, by ``attach``: speed and speed_difference - subtracted (against the motion) in the
-torque sum(s); spring_angle - added to the spring torque (the gain is renamed ``<gain>_lin`` and a sum
-with the old name adds the two); input - every block that read the input reads ``output`` instead (the
-fragment's own blocks still read the input).
+torque sum(s); position (an integrator of a speed) - subtracted in the speed's torque sum (against the
+position, as a spring to ground pulls); spring_angle - added to the spring torque (the gain is renamed
+``<gain>_lin`` and a sum with the old name adds the two); state (any integrator) - subtracted from its
+integrand (a leak, an outflow); input and signal (any block or input named by ``at``) - every block that read
+the signal reads ``output`` instead (the fragment's own blocks still read it).
+
+``at: <signal>`` restricts the effect to that one signal of the chart (a chart without it is an error naming
+the effects file's line). Without ``attach``, the kind is read off the chart: ``at: x`` with x a position
+attaches as a position, a speed as a speed, any other block or input as a signal.
 
 The fragment is validated as a chart of its own (the chart's signals stand in as inputs) when it is applied,
 so every structural mistake is reported as for a chart, naming the effects file and the effect.
@@ -50,17 +58,22 @@ from .graph import (
     add_terms,
     fresh_name,
     input_places,
+    positions,
     reroute,
+    signal_place,
     speed_differences,
     speeds,
     spring_angles,
+    states,
 )
 
 __all__ = ["YamlEffect", "load_effects_file", "EFFECTS_FORMAT", "ATTACH_KINDS"]
 
 EFFECTS_FORMAT = 1
-ATTACH_KINDS = ("speed", "speed_difference", "spring_angle", "input")
-_KEYS = ("description", "attach", "parameters", "blocks", "output", "options", "neutral")
+ATTACH_KINDS = ("speed", "speed_difference", "spring_angle", "position", "state", "input", "signal")
+_KEYS = ("description", "attach", "at", "parameters", "blocks", "output", "options", "neutral")
+_FINDERS = {"speed": speeds, "speed_difference": speed_differences, "spring_angle": spring_angles,
+            "position": positions, "state": states, "input": input_places}
 _PLACEHOLDERS = ("at", "name", "option", "sum", "spring")
 
 
@@ -93,7 +106,7 @@ class YamlEffect:
     """An effect defined by a chart fragment (see the module docstring)."""
 
     name: str
-    attach: str
+    attach: str | None
     parameters: dict
     blocks: dict
     output: str
@@ -103,10 +116,28 @@ class YamlEffect:
     extra_dof: int = 0
     file: str = "<effects>"
     lines: dict = field(default_factory=dict)
+    at: str | None = None
 
     def places(self, diagram: Diagram) -> tuple[Place, ...]:
-        return {"speed": speeds, "speed_difference": speed_differences, "spring_angle": spring_angles,
-                "input": input_places}[self.attach](diagram)
+        """Every place of the attach kind, or the one named by `at` (SdnnError when the chart lacks it)."""
+        if self.at is None:
+            return _FINDERS[self.attach](diagram)
+        if self.attach is None or self.attach == "signal":
+            try:
+                place = signal_place(diagram, self.at)
+            except KeyError:
+                raise self._fail(f"at: '{self.at}' is no signal of the chart",
+                                 did_you_mean(self.at, list(diagram.block_names) + list(diagram.input_names)),
+                                 ("at",)) from None
+            return (place if self.attach is None else Place(self.at, "signal"),)
+        found = _FINDERS[self.attach](diagram)
+        chosen = tuple(p for p in found if p.at == self.at)
+        if not chosen:
+            there = ", ".join(p.at for p in found) or "none"
+            raise self._fail(f"at: '{self.at}' is no {self.attach.replace('_', ' ')} of the chart "
+                             f"(its {self.attach.replace('_', ' ')}s: {there})",
+                             did_you_mean(self.at, [p.at for p in found]), ("at",))
+        return chosen
 
     def options(self, diagram: Diagram, place: Place, scales: Scales) -> tuple:
         return self.option_values or (None,)
@@ -117,8 +148,9 @@ class YamlEffect:
     def describe(self) -> str:
         return f"{self.name} ({self.file}): {self.description or 'user effect'}"
 
-    def _fail(self, message: str, hint: str | None = None) -> SdnnError:
-        return SdnnError.at("DIAG021", f"effect '{self.name}': {message}", self.file, self.lines.get(()), hint=hint)
+    def _fail(self, message: str, hint: str | None = None, key: tuple = ()) -> SdnnError:
+        line = self.lines.get(key) or self.lines.get(())
+        return SdnnError.at("DIAG021", f"effect '{self.name}': {message}", self.file, line, hint=hint)
 
     def patch(self, diagram: Diagram, place: Place, option=None) -> Diagram:
         prefix = fresh_name(diagram, f"{self.name}_{place.at}")
@@ -139,13 +171,22 @@ class YamlEffect:
                       mini.parameters if p.name in params]
         new_blocks = [replace(b, location=Location(self.file, self.lines.get(("blocks",)))) for b in mini.blocks]
         patched = add_blocks(diagram, new_blocks, new_params)
-        if self.attach in ("speed", "speed_difference"):
+        kind = place.kind if place.kind in ATTACH_KINDS else self.attach
+        if kind in ("speed", "speed_difference", "position"):
             terms: dict[str, tuple[Term, ...]] = {}
             for s, sign in place.sums:
                 terms[s] = terms.get(s, ()) + (Term(output, sign),)
             return add_terms(patched, terms)
-        if self.attach == "input":
+        if kind in ("input", "signal"):
             return reroute(patched, place.at, output, keep=set(blocks))
+        if kind == "state":
+            x = diagram.block(place.at)
+            integrand = fresh_name(patched, f"{place.at}_in")
+            summed = Block(integrand, "sum", tuple(x.inputs) + (Term(output, -1),),
+                           description=f"integrand of {place.at} with {self.name} (diagnose)")
+            patched = add_blocks(patched, [summed])
+            return replace(patched, blocks=tuple(replace(b, inputs=(Term(integrand),)) if b.name == place.at else b
+                                                 for b in patched.blocks))
         spring = diagram.block(place.via)
         lin = fresh_name(patched, f"{spring.name}_lin")
         out = []
@@ -205,9 +246,15 @@ def load_effects_file(path: str | Path) -> dict[str, YamlEffect]:
         bad = sorted(set(spec) - set(_KEYS))
         _check(not bad, f"effect '{name}': unknown key(s) {', '.join(map(str, bad))}", file,
                doc.line(*where, bad[0]) if bad else line, did_you_mean(str(bad[0]), _KEYS) if bad else None)
-        attach = spec.get("attach")
-        _check(attach in ATTACH_KINDS, f"effect '{name}': 'attach' must be one of {', '.join(ATTACH_KINDS)}, "
-               f"found {attach!r}", file, doc.line(*where, "attach"), did_you_mean(str(attach), ATTACH_KINDS))
+        attach, at = spec.get("attach"), spec.get("at")
+        _check(at is None or (isinstance(at, str) and at.isidentifier()),
+               f"effect '{name}': 'at' must name a signal of the chart, found {at!r}", file, doc.line(*where, "at"))
+        _check(attach in ATTACH_KINDS or (attach is None and at is not None),
+               f"effect '{name}': 'attach' must be one of {', '.join(ATTACH_KINDS)}, found {attach!r}"
+               + ("" if attach is not None else " (or give 'at: <signal>')"), file,
+               doc.line(*where, "attach") or line, did_you_mean(str(attach), ATTACH_KINDS))
+        _check(attach != "signal" or at is not None, f"effect '{name}': 'attach: signal' needs 'at: <signal>'",
+               file, doc.line(*where, "attach"))
         for key in ("parameters", "blocks"):
             value = spec.get(key, {} if key == "parameters" else None)
             _check(isinstance(value, dict) and (key == "parameters" or value),
@@ -226,7 +273,8 @@ def load_effects_file(path: str | Path) -> dict[str, YamlEffect]:
         description = spec.get("description", "")
         _check(isinstance(description, str), f"effect '{name}': 'description' must be text", file,
                doc.line(*where, "description"))
-        lines = {(): line, ("blocks",): doc.line(*where, "blocks"), ("parameters",): doc.line(*where, "parameters")}
+        lines = {(): line, ("blocks",): doc.line(*where, "blocks"), ("parameters",): doc.line(*where, "parameters"),
+                 ("at",): doc.line(*where, "at")}
         out[name] = YamlEffect(name, attach, dict(spec.get("parameters") or {}), dict(spec["blocks"]), output,
-                               description, tuple(options), neutral, 1 if len(options) > 1 else 0, file, lines)
+                               description, tuple(options), neutral, 1 if len(options) > 1 else 0, file, lines, at)
     return out
