@@ -310,6 +310,10 @@ _BOOK: tuple[Rule, ...] = (
     _r("rcond", 1e-12, "relative singular value", "The score test's least squares treat smaller singular values "
        "as zero.", "diagnose.score.RCOND",
        note="equal to lm_min_rel_step, cost_rounding, initstate_min_rel_cost_change by coincidence"),
+    _r("neutral_roundoff", 1e-8, "fraction of the largest residual", "A chart holding every neutral patch is "
+       "neutral when it moves the residual by no more than float round-off over a long run (1e-11 seen on 10^5 "
+       "steps), far below any sensor's resolution.", "diagnose.score.NEUTRAL_ROUNDOFF",
+       note="equal to rank_rtol by coincidence"),
     _r("tracked_window", 100, "rows", "White noise's running mean square over 100 rows spreads by 14 %, far "
        "inside follow_fraction.", "diagnose.tracked.WINDOW",
        note="equal to lm_max_iter, crawl_iterations, stage_max_iter by coincidence"),
