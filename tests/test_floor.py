@@ -166,6 +166,7 @@ def test_the_advised_substeps_remove_the_warning_on_the_bundled_example():
     the warning. The oracle is the continuous chart itself, through a second fit."""
     root = Path(__file__).resolve().parent.parent
     chart, data = sd.load_chart(root / "diagrams/engine.yaml"), sd.read_csv(root / "examples/data/engine_idle.csv")
+    chart = dataclasses.replace(chart, delays=None)  # the default first-order rule (the chart states midpoint)
     first = sd.identify(dataclasses.replace(chart, substeps=1), data)
     (warning,) = _floor_warnings(first)
     n = warning.numbers["suggested_substeps"]
@@ -180,6 +181,7 @@ def test_auto_substeps_refit_finer_when_the_fitted_curve_outgrows_them():
     then carries no floor warning and says what it did."""
     root = Path(__file__).resolve().parent.parent
     chart, data = sd.load_chart(root / "diagrams/engine.yaml"), sd.read_csv(root / "examples/data/engine_idle.csv")
+    chart = dataclasses.replace(chart, substeps=None, delays=None)  # the defaults (the chart states its own N)
     out = sd.identify(chart, data, floor_bias=False)
     doc = out.to_document()
     refit = doc["substeps_refit"]

@@ -62,7 +62,14 @@ def test_the_tour_block_has_every_step():
     assert any("make_fleet.py tour/logs" in c for c in tour_commands())  # step 8 says how to make the logs
 
 
-def _run_tour(root: Path, env: dict) -> None:
+def _on_the_bundled_examples(command: str) -> bool:
+    """A command that reads only the bundled charts and record (not the bench, the logs or a shortened fit)."""
+    return command.startswith("sdnn ") and not re.search(r"bench|logs|fleet|stage2", command)
+
+
+def _run_tour(root: Path, env: dict) -> dict[str, str]:
+    """Run the tour; {command: what an `sdnn` command printed, stdout and stderr}."""
+    printed = {}
     for command in tour_commands():
         argv = shlex.split(command, comments=True)
         if argv[0] != "sdnn":
@@ -76,6 +83,8 @@ def _run_tour(root: Path, env: dict) -> None:
             continue
         res = CliRunner().invoke(main, argv[1:])
         assert res.exit_code == 0, f"{command}\n{res.output}"
+        printed[command] = res.output
+    return printed
 
 
 def test_the_readme_tour_runs_as_written(tmp_path, monkeypatch):
@@ -88,7 +97,14 @@ def test_the_readme_tour_runs_as_written(tmp_path, monkeypatch):
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     before = sorted(p.name for p in tmp_path.iterdir())
     for run in (1, 2):  # the second run meets every file of the first: the tour must start afresh
-        _run_tour(tmp_path, env)
+        printed = _run_tour(tmp_path, env)
+        # the README and its tour write the commands in the one argument order: no note saying how to write them
+        assert [c for c, out in printed.items() if "argument order" in out or "the chart comes first" in out] == []
+        # the charts users copy and the bundled record run clean: no warning (the bench's fits are shortened)
+        warned = {c: [line for line in out.splitlines() if re.search(r"^warning|: warning\[", line)]
+                  for c, out in printed.items() if _on_the_bundled_examples(c)}
+        assert any("examples/data/engine_idle.csv" in c for c in warned)
+        assert {c: lines for c, lines in warned.items() if lines} == {}, f"run {run}"
         tour = tmp_path / "tour"
         missing = [f for f in WRITTEN if not (tour / f).is_file()]
         assert missing == [], f"run {run}"
