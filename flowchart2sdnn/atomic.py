@@ -41,6 +41,7 @@ __all__ = [
     "atomic_write_text",
     "check_output_path",
     "clean_temp_files",
+    "read_json",
 ]
 
 TEMP_PREFIX = ".sdnn-tmp."
@@ -213,3 +214,20 @@ def check_output_path(path: PathLike, inputs: Sequence[PathLike] = (), force: bo
         raise SdnnError.at(
             "OUT003", f"output '{name}' already exists", file=name, hint="use --force to overwrite it"
         )
+
+
+def read_json(path: str | Path, unreadable: str, not_json: str) -> Any:
+    """The JSON value in file `path`; SdnnError with code `unreadable` (missing or unreadable file) or `not_json`
+    (with the line and column of the fault) naming the file otherwise."""
+    import json
+
+    name = str(path)
+    try:
+        return json.loads(Path(path).read_text(encoding="utf-8"))
+    except FileNotFoundError:
+        raise SdnnError.at(unreadable, "no such file", name) from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise SdnnError.at(unreadable, f"cannot read: {exc}", name) from None
+    except json.JSONDecodeError as exc:
+        raise SdnnError.at(not_json, f"not JSON: {exc.msg}", name, exc.lineno, exc.colno) from None
+

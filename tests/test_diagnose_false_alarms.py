@@ -146,10 +146,10 @@ def test_the_control_gets_the_growing_horizon_when_a_candidate_did(monkeypatch):
     grown_calls = []
     ident = SimpleNamespace(status="converged")
 
-    def fake_fit_chart(diagram, train, records, settings, max_iter, dof, start, progress=None, accepted=()):
+    def fake_fit_chart(diagram, train, records, settings, max_iter, dof, start, progress=None, accepted=(), target=float("inf")):
         return Fitted(ident, 1.0, 100, 5, {}, start)
 
-    def fake_fit_growing(diagram, train, records, settings, max_iter, dof, start, accepted=()):
+    def fake_fit_growing(diagram, train, records, settings, max_iter, dof, start, accepted=(), target=float("inf")):
         grown_calls.append((diagram, start))
         return Fitted(ident, 0.5, 100, 5, {}, start)
 

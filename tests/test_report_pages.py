@@ -21,6 +21,7 @@ import pytest
 from click.testing import CliRunner
 from diagnose_bench import DATA, chart, record
 from html_check import read_page
+from test_per_record import CHART as PER_RECORD_CHART
 
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.data.csvdata import write_csv
@@ -33,25 +34,7 @@ pytest.importorskip("matplotlib")
 CHROMIUM = shutil.which("chromium") or shutil.which("chromium-browser")
 
 # an offset per record (the HSM150 recipe in small): the mean offset fits none of the records
-CHART = """\
-sdnn: 1
-name: motor_offset
-sample_time: 0.01
-inputs:
-  M: {unit: N*m}
-outputs:
-  w: {unit: rad/s}
-parameters:
-  J: {init: 0.02, min: 0, unit: kg*m^2}
-  b: {init: 0.01, min: 0, unit: N*m*s/rad}
-  off: {init: 0.0, unit: N*m, per_record: true}
-blocks:
-  T0: {type: constant, k: off}
-  s: {type: sum, in: [M, T0, -Mb]}
-  a: {type: gain, in: s, k: 1/J}
-  w: {type: integrator, in: a}
-  Mb: {type: gain, in: w, k: b}
-"""
+CHART = PER_RECORD_CHART.replace("PR", "true")
 OFFSETS = {"r1.csv": 0.03, "r2.csv": -0.02, "r3.csv": 0.01, "val.csv": -0.04}
 
 

@@ -11,11 +11,11 @@ Layer: diagnose.
 
 from __future__ import annotations
 
-import json
 from collections.abc import Mapping
 from dataclasses import fields
 from pathlib import Path
 
+from ..atomic import read_json
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify.document import from_document as identification_from
@@ -121,14 +121,7 @@ def from_document(doc: Mapping, chart: Diagram | None = None) -> Diagnosis:
 def load_report(path: str | Path) -> dict:
     """Read a REPORT.json written by `sdnn diagnose --report`; SdnnError naming the file when it is not one."""
     name = str(path)
-    try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise SdnnError.at("DIAG031", "no such file", name) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SdnnError.at("DIAG031", f"cannot read: {exc}", name) from None
-    except json.JSONDecodeError as exc:
-        raise SdnnError.at("DIAG032", f"not JSON: {exc.msg}", name, exc.lineno, exc.colno) from None
+    data = read_json(path, "DIAG031", "DIAG032")
     if not isinstance(data, dict) or data.get("format") != REPORT_FORMAT:
         raise SdnnError.at("DIAG033", f"not an sdnn diagnose report (expected \"format\": \"{REPORT_FORMAT}\")",
                            name)

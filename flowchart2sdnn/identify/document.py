@@ -10,11 +10,11 @@ Layer: identify.
 
 from __future__ import annotations
 
-import json
 import math
 from dataclasses import replace
 from pathlib import Path
 
+from ..atomic import read_json
 from ..diagram.dump import with_values
 from ..diagram.model import Diagram
 from ..errors import SdnnError
@@ -175,14 +175,7 @@ def read_model(path: str | Path, chart: str | Path | None = None) -> tuple[Diagr
 def load_result(path: str | Path) -> dict:
     """Read a RESULT.json written by `sdnn identify`; SdnnError naming the file when it is not one."""
     name = str(path)
-    try:
-        data = json.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise SdnnError.at("RES001", "no such file", name) from None
-    except (OSError, UnicodeDecodeError) as exc:
-        raise SdnnError.at("RES001", f"cannot read: {exc}", name) from None
-    except json.JSONDecodeError as exc:
-        raise SdnnError.at("RES002", f"not JSON: {exc.msg}", name, exc.lineno, exc.colno) from None
+    data = read_json(path, "RES001", "RES002")
     if not isinstance(data, dict) or data.get("format") != RESULT_FORMAT:
         raise SdnnError.at("RES003", f"not an sdnn result file (expected \"format\": \"{RESULT_FORMAT}\")", name)
     params = data.get("parameters")
