@@ -326,7 +326,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                            "score_rows_added": [s.candidate.title() for s in prefix_best[1]] if prefix_best else []}
             refits: list[tuple[Score, Fitted]] = []
             for s, fitted, seconds in _refits(best, nominal_chart, train, records, settings, extra_dof, accepted,
-                                              executor, lambda text, r=r: say(f"round {r}: {text}", None)):
+                                              executor, lambda text, r=r: say(f"round {r}: {text}", None),
+                                              current.cost):
                 timing["refit"].append(seconds)
                 if _was_interrupted(fitted):
                     raise KeyboardInterrupt
@@ -336,7 +337,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             if more:
                 say(f"round {r}: no refit near the noise; refitting {len(more)} more places", None)
                 for s, fitted, seconds in _refits(more, nominal_chart, train, records, settings, extra_dof,
-                                                  accepted, executor, lambda text, r=r: say(f"round {r}: {text}", None)):
+                                                  accepted, executor, lambda text, r=r: say(f"round {r}: {text}", None),
+                                                  current.cost):
                     timing["refit"].append(seconds)
                     if _was_interrupted(fitted):
                         raise KeyboardInterrupt
@@ -529,7 +531,8 @@ def _control_entry(control: Fitted | None, used: bool) -> dict | None:
 
 
 def _refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Dataset], records,
-            settings: DiagnoseSettings, extra_dof: int, accepted: list, executor, say: Callable[[str], None]):
+            settings: DiagnoseSettings, extra_dof: int, accepted: list, executor, say: Callable[[str], None],
+            current_cost: float = math.inf):
     """(score, the better of its brief refits or None, seconds) for each candidate in `best`, in order.
 
     Each candidate is refitted from the current fit and from the chart as given (plus the accepted effects),
@@ -537,6 +540,11 @@ def _refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Dataset],
     neutral is refitted from the chart as given twice, on the whole records at once and with a growing
     horizon (``settings.horizon``), in one work unit. The lowest training cost wins, ties go to the refit from
     the current fit.
+
+    A refit is cut off (:func:`~.fitting.behind`) once it cannot reach the lowest training cost of a refit before
+    it, nor the relevance bar: the current fit's cost `current_cost` lowered by ``min_gain`` of its RMS (an effect
+    that cannot lower the training RMS by that much will not lower the validation RMS by it, which acceptance
+    asks; see :func:`refusal`).
     """
     acc = tuple(a["effect"] + "@" + a["at"] for a in accepted)
     units, owner = [], []
@@ -561,7 +569,7 @@ def _refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Dataset],
     # candidate by candidate, best score first, both starts of one candidate together (the executor's work), each
     # cut off at the lowest cost a refit before it reached (fitting.behind): a refit that cannot reach the round's
     # best stops after a few iterations. The waves do not depend on the executor, so neither do the results.
-    leader, done = math.inf, 0
+    leader, done = current_cost * (1 - settings.min_gain) ** 2, 0
     for i in dict.fromkeys(owner):
         batch = [(*u, leader) for u, o in zip(units, owner, strict=True) if o == i]
         results = map(refit_unit, batch) if executor is None else executor.map(refit_unit, batch)
