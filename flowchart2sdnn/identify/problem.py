@@ -21,7 +21,8 @@ from ..strictjson import finite_or_none
 from .arrays import columns_of, data_init, network_input_names
 from .curvespan import with_spans
 
-__all__ = ["Problem", "columns_of", "Segment", "build_problem", "metrics", "combined_metrics", "data_init", "required_columns", "CHATTER_LIMIT"]
+__all__ = ["Problem", "columns_of", "Segment", "build_problem", "metrics", "combined_metrics", "data_init", "required_columns", "CHATTER_LIMIT",
+           "interruptible"]
 
 #: A trial step whose network chatters at rest (see network.stability) by more than this is rejected.
 CHATTER_LIMIT = rules.value("chatter_limit")
@@ -34,7 +35,7 @@ def required_columns(diagram: Diagram) -> list[str]:
 
 
 @contextmanager
-def _interruptible():
+def interruptible():
     """Let Ctrl-C inside a numba kernel surface as KeyboardInterrupt (the trainer's clean stop).
 
     A SIGINT that arrives while compiled code runs is raised when numba next calls back into Python, where it
@@ -126,7 +127,7 @@ class Problem:
         es, js = [], []
         index = self.record_index()
         for k, s in enumerate(self.segments):
-            with _interruptible():
+            with interruptible():
                 yhat, jac = self.compiled.jacobian(self.record_x(x, k) if index else x, s.inputs, s.init)
             if not np.all(np.isfinite(yhat)) or not np.all(np.isfinite(jac)):
                 return None
@@ -149,7 +150,7 @@ class Problem:
         es = []
         index = self.record_index()
         for k, s in enumerate(self.segments):
-            with _interruptible():
+            with interruptible():
                 yhat = self.compiled.simulate(self.record_x(x, k) if index else x, s.inputs, s.init)
             if not np.all(np.isfinite(yhat)):
                 return None

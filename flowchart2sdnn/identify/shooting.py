@@ -63,7 +63,7 @@ from .. import rules
 from ..errors import SdnnError
 from ..fit.lm import LMOptions, LMResult, WideFirstCSR, levenberg_marquardt
 from .initstate import state_neurons
-from .problem import Problem, _interruptible
+from .problem import Problem, interruptible
 
 __all__ = ["Segmented", "shooting_fit", "stage_lengths", "kept_stage", "MAX_SEGMENTS", "GROWTH", "WEIGHT_GROWTH",
            "STAGE_MAX_ITER", "MERGE_RISE", "RESEAT_RATIO", "RESEAT_ROUNDS", "reseat", "NOISE_MARGIN", "NOISE_ORDERS", "NOISE_BANDS", "noise_level", "noise_variance",
@@ -288,7 +288,7 @@ class Segmented:
                                         [p.b for p in pieces], self._histories(x, chunks[c]), states, with_jac)
             return c, y, dy
 
-        with _interruptible():
+        with interruptible():
             if self.threads == 1 or len(chunks) == 1:
                 for c in range(len(chunks)):
                     yield run(c)
@@ -520,7 +520,7 @@ class Segmented:
                         x[p.column + j] = self._records[p.record].targets[p.a - 1, o]
             if len(self.free):
                 seg = self._records[p.record]
-                with _interruptible():
+                with interruptible():
                     y = self.problem.compiled.simulate(theta, seg.inputs[p.a:p.b], history=self.history(x, p),
                                                        states=self.free)
                 prev = y[-1, n_out:] if np.all(np.isfinite(y[-1])) else self.bases[p.record][self.free]
