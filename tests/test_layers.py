@@ -34,7 +34,7 @@ RANKS = {
 
 
 def _unit(module: str) -> str:
-    """flowchart2sdnn.identify.run -> identify; flowchart2sdnn (the package's __init__) -> __init__."""
+    """flowchart2sdnn.identify.offline.run -> identify; flowchart2sdnn (the package's __init__) -> __init__."""
     parts = module.split(".")
     return parts[1] if len(parts) > 1 else "__init__"
 
@@ -103,10 +103,10 @@ def test_the_checker_sees_upward_imports_hidden_in_functions(tmp_path):
     (root / "fit").mkdir(parents=True)
     (root / "__init__.py").write_text("")
     lazy = root / "fit" / "x.py"
-    lazy.write_text("import numpy\nfrom .lm import LMOptions\n\ndef f():\n    from ..identify.run import identify\n")
+    lazy.write_text("import numpy\nfrom .lm import LMOptions\n\ndef f():\n    from ..identify.offline.run import identify\n")
     absolute = root / "fit" / "y.py"
     absolute.write_text("def g():\n    import flowchart2sdnn.network.runtime\n")
-    assert _violations(lazy, root) == ["line 5: flowchart2sdnn.identify.run (rank 5 >= fit's 2)"]
+    assert _violations(lazy, root) == ["line 5: flowchart2sdnn.identify.offline.run (rank 5 >= fit's 2)"]
     assert _violations(absolute, root) == ["line 2: flowchart2sdnn.network.runtime (rank 3 >= fit's 2)"]
 
 

@@ -15,8 +15,8 @@ import pytest
 from flowchart2sdnn.api import dataset_from_frame
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
-from flowchart2sdnn.identify.problem import build_problem
-from flowchart2sdnn.identify.run import lm_options
+from flowchart2sdnn.identify.offline.problem import build_problem
+from flowchart2sdnn.identify.offline.run import lm_options
 from flowchart2sdnn.identify.settings import CRAWL_DECREASE, CRAWL_ITERATIONS, CRAWL_NOISE, IdentifySettings
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
@@ -99,7 +99,7 @@ def test_identify_says_when_the_crawl_rule_stopped_it(monkeypatch):
     """The rule made to fire as soon as the fit is at the floor (3 iterations, any gain): the result says so."""
     import importlib
 
-    run = importlib.import_module("flowchart2sdnn.identify.run")  # the module (the package exports a function)
+    run = importlib.import_module("flowchart2sdnn.identify.offline.run")  # the module (the package exports a function)
     identify = run.identify
 
     plant = load_diagram(ROOT / "diagrams" / "two_mass_coulomb_plant.yaml")

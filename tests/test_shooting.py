@@ -1,4 +1,4 @@
-"""--shooting L: multiple shooting, then single shooting over the whole record (identify.shooting).
+"""--shooting L: multiple shooting, then single shooting over the whole record (identify.shooting.multiple).
 
 Oracles: central finite differences of the multiple-shooting residual (the Jacobian, including the columns of
 the free segment starts that the RTRL kernel differentiates through the history), scipy's least_squares on
@@ -23,11 +23,11 @@ from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.fit.steps import gram
-from flowchart2sdnn.identify import shooting
-from flowchart2sdnn.identify.initstate import state_neurons
-from flowchart2sdnn.identify.problem import build_problem
-from flowchart2sdnn.identify.run import IdentifySettings, identify
-from flowchart2sdnn.identify.shooting import Segmented, stage_lengths
+from flowchart2sdnn.identify.offline.initstate import state_neurons
+from flowchart2sdnn.identify.offline.problem import build_problem
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
+from flowchart2sdnn.identify.shooting import multiple as shooting
+from flowchart2sdnn.identify.shooting.multiple import Segmented, stage_lengths
 from flowchart2sdnn.network.runtime import CompiledNetwork
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 from flowchart2sdnn.simulate.excitation import aprbs

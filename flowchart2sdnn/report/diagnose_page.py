@@ -18,7 +18,7 @@ from pathlib import Path
 
 from ..data.csvdata import Dataset
 from ..diagnose.loop import Diagnosis
-from ..identify.result import Metrics
+from ..identify import Metrics
 from ..notices import Notice
 from .diagnose_plots import figures
 from .diagnose_text import STOP_MESSAGES, fit_percent_change, shown_candidate_rows

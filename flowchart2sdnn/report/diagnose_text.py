@@ -2,7 +2,7 @@
 
 from __future__ import annotations
 
-from ..identify.document import from_document
+from ..identify import from_document
 from ..tables import table
 from .identify_text import format_result
 

@@ -8,7 +8,7 @@ metrics and everything needed to reproduce the run. Never prints: progress goes 
 `progress(text, fraction)`.
 
 Every start, serial or not, runs through an executor (:class:`~flowchart2sdnn.executors.SerialExecutor` by
-default) and the one fitting function of :mod:`flowchart2sdnn.identify.workers`.
+default) and the one fitting function of :mod:`flowchart2sdnn.identify.offline.workers`.
 
 Layer: identify (below it: simulate's oracle, fit, network, compiler, data, diagram, executors).
 """
@@ -23,25 +23,27 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .._version import __version__
-from ..analysis.loops import delay_rule
-from ..compiler.substeps import AUTO_CAP, requested_substeps
-from ..data.csvdata import Dataset
-from ..diagram.dump import with_values
-from ..diagram.model import Diagram
-from ..errors import SdnnError
-from ..executors import SerialExecutor
-from ..fit.lm import CONVERGED_STATUSES, CRAWL_DETAIL, LMOptions, LMResult
-from ..fit.multistart import draw_starts, run_multistart
-from ..notices import Notice, messages
-from .curvestart import curve_start
-from .evidence import assess, no_excitation_message, on_bound_warnings, sqrt_domain_warnings, start_stability
-from .floor import FLOOR_WARN, floor_warnings, measure_floor, oracle_runs
-from .floorbias import estimate_floor_bias, floor_bias_warnings
-from .initstate import estimate_initial_state
-from .perrecord import per_record_estimates
-from .problem import Problem, build_problem, combined_metrics, data_init, metrics
-from .result import (
+from ..._version import __version__
+from ...analysis.loops import delay_rule
+from ...compiler.substeps import AUTO_CAP, requested_substeps
+from ...data.csvdata import Dataset
+from ...diagram.dump import with_values
+from ...diagram.model import Diagram
+from ...errors import SdnnError
+from ...executors import SerialExecutor
+from ...fit.lm import CONVERGED_STATUSES, CRAWL_DETAIL, LMOptions, LMResult
+from ...fit.multistart import draw_starts, run_multistart
+from ...notices import Notice, messages
+from ..assess.evidence import (
+    assess,
+    no_excitation_message,
+    on_bound_warnings,
+    sqrt_domain_warnings,
+    start_stability,
+)
+from ..assess.floor import FLOOR_WARN, floor_warnings, measure_floor, oracle_runs
+from ..assess.floorbias import estimate_floor_bias, floor_bias_warnings
+from ..result import (
     ChartSource,
     Curve,
     DataInfo,
@@ -54,7 +56,7 @@ from .result import (
     OptimizerTrace,
     RecordInfo,
 )
-from .settings import (
+from ..settings import (
     CRAWL_DECREASE,
     CRAWL_ITERATIONS,
     CRAWL_NOISE,
@@ -67,8 +69,12 @@ from .settings import (
     PACE_ITERATIONS,
     IdentifySettings,
 )
-from .shootauto import SUSPECT_PEAK, chaotic_at, choose_shooting, second_look
-from .shooting import kept_stage, noise_cost
+from ..shooting.auto import SUSPECT_PEAK, chaotic_at, choose_shooting, second_look
+from ..shooting.multiple import kept_stage, noise_cost
+from .curvestart import curve_start
+from .initstate import estimate_initial_state
+from .perrecord import per_record_estimates
+from .problem import Problem, build_problem, combined_metrics, data_init, metrics
 from .workers import fit_start, fit_task, quasi_online_start, run_quasi_online_start, run_start
 
 __all__ = ["IdentifySettings", "Identification", "identify", "lm_options", "with_floor_bias"]
@@ -141,7 +147,7 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     start_warnings = tuple(warnings)  # about the user's start: a refit from the fit's values keeps them
 
     auto, requested_shooting = None, settings.shooting
-    if settings.shooting == "auto":  # the rule reads the records (identify.shootauto); the window has no shooting
+    if settings.shooting == "auto":  # the rule reads the records (identify.shooting.auto); the window has no shooting
         auto = choose_shooting(problem, x0) if problem.names and not settings.online else None
         settings = replace(settings, shooting=auto.length or "off" if auto is not None else "off")
     starts = settings.shooting_starts
@@ -306,7 +312,7 @@ def _far_above_noise(problem: Problem, cost: float | None) -> list[Notice]:
 
 def with_floor_bias(ident: Identification, train: Sequence[Dataset]) -> Identification:
     """`ident` (an offline fit made with ``floor_bias`` off) with the discretization-bias analysis identify runs by
-    default (:func:`~flowchart2sdnn.identify.floorbias.estimate_floor_bias`) at its point, which stays as it is:
+    default (:func:`~flowchart2sdnn.identify.assess.floorbias.estimate_floor_bias`) at its point, which stays as it is:
     RESULT.json's `discretization.bias`, ci95 widened by |beta| (ci95_noise unchanged) and the warning naming
     the parameters shifted by more than half a standard error. `train`: the records `ident` was fitted on, in
     order. Unchanged where the analysis does not apply (no offline fit, or already done)."""
@@ -339,7 +345,7 @@ def _floor_bias(problem: Problem, chart, x, records: list, settings: IdentifySet
 
 def discretization(diagram, network) -> dict:
     """RESULT.json's `discretization`: the sub-steps asked for and used, the step, the delay rule (identify adds
-    `floor`, the network against the continuous chart: :mod:`flowchart2sdnn.identify.floor`)."""
+    `floor`, the network against the continuous chart: :mod:`flowchart2sdnn.identify.assess.floor`)."""
     return {"substeps": network.substeps, "requested": diagram.substeps, "sample_time": network.sample_time,
             "step": network.step, "delays": delay_rule(diagram)}
 
@@ -347,7 +353,7 @@ def discretization(diagram, network) -> dict:
 def _shooting(settings: IdentifySettings, lm: LMResult | None, auto=None) -> dict:
     """RESULT.json's `shooting`: the segment length used (`auto`: what the rule chose and why), the best start's
     stages, and which stage's fit is the result (`final_length`; `predictable` false when a merge was refused:
-    a chaotic record, validated on short horizons only; identify.shooting)."""
+    a chaotic record, validated on short horizons only; identify.shooting.multiple)."""
     stages = [{k: None if isinstance(v, float) and not np.isfinite(v) else v for k, v in s.items()}
               for s in lm.stages] if lm is not None else []  # a diverged stage's cost is inf: JSON has no inf
     out = {"length": settings.shooting, "requested": "auto" if auto is not None else settings.shooting,
@@ -422,7 +428,7 @@ def lm_options(settings: IdentifySettings, problem: Problem) -> LMOptions:
 
 def _second_look(problem: Problem, x0, lower, upper, settings: IdentifySettings, starts: str, auto, out: _Outcome,
                  progress, stop, executor):
-    """(outcome, settings, auto): single shooting's when auto's second look (identify.shootauto.second_look) does
+    """(outcome, settings, auto): single shooting's when auto's second look (identify.shooting.auto.second_look) does
     not apply or multiple shooting does no better per sample, else multiple shooting's."""
     length = second_look(problem, auto, out.lm.cost)
     if length is None:
@@ -532,7 +538,7 @@ def _online(problem: Problem, x0, lower, upper, settings: IdentifySettings, prog
     With several starts each run is a whole quasi-online pass; the one with the lowest mean window cost at
     the end of the record (the paper's error of a run) is reported, as a bank of online estimators would.
     """
-    from .online import OnlineOptions
+    from ..online.run import OnlineOptions
 
     opts = OnlineOptions(window=min(settings.window, len(problem.inputs)),
                          average=settings.average, every=settings.every, start=settings.online_start)

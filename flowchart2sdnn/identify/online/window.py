@@ -1,6 +1,6 @@
-"""The window numerics of the quasi-online LM run (:mod:`.online_kernel` states the algorithm).
+"""The window numerics of the quasi-online LM run (:mod:`.kernel` states the algorithm).
 
-numba functions on the arrays of :class:`.online_kernel.OnlineState`: the bound transform and the weights at
+numba functions on the arrays of :class:`.kernel.OnlineState`: the bound transform and the weights at
 a parameter point, the FIFO window's running sums of the normal equations, the damped LM step by Cholesky,
 and the window mode's iteration (simulate the window's samples again at a trial, relinearise an accepted
 one). The network steps are those of the offline kernels (:func:`flowchart2sdnn.network.kernels.rtrl_step`,
@@ -18,9 +18,9 @@ import math
 import numba
 import numpy as np
 
-from ..fit import damping
-from ..network.kernels import ix, rtrl_step, simulate_step
-from ..network.weight_program import eval_weights
+from ...fit import damping
+from ...network.kernels import ix, rtrl_step, simulate_step
+from ...network.weight_program import eval_weights
 
 F_MU, F_EE, F_CC, F_CH, F_NL = range(5)
 (I_COUNT, I_HEAD, I_STEPS, I_BLOCK_POS, I_ACCEPTED, I_REJECTED, I_DIVERGED, I_CHOL_FALLBACK,

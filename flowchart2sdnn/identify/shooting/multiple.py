@@ -6,7 +6,7 @@ for a while, and LM lands in one of many local minima. Short segments, each star
 simulation close to the record, and the cost over them is smooth.
 
 Each record is cut into segments of L samples. A segment's initial state is the value before its first step
-of every integrator neuron (identify.initstate.state_neurons): measured ones from the data at that sample,
+of every integrator neuron (identify.offline.initstate.state_neurons): measured ones from the data at that sample,
 unmeasured ones (a shaft twist, the speed of an unmeasured mass) free quantities fitted with the parameters.
 A record's first segment starts from the record's own initial state, as in single shooting. Other delayed
 neurons (a friction read one step late) keep the chart's initial value at every segment start; the free
@@ -59,11 +59,11 @@ from dataclasses import dataclass, replace
 import numpy as np
 from scipy import sparse
 
-from .. import rules
-from ..errors import SdnnError
-from ..fit.lm import LMOptions, LMResult, WideFirstCSR, levenberg_marquardt
-from .initstate import state_neurons
-from .problem import Problem, interruptible
+from ... import rules
+from ...errors import SdnnError
+from ...fit.lm import LMOptions, LMResult, WideFirstCSR, levenberg_marquardt
+from ..offline.initstate import state_neurons
+from ..offline.problem import Problem, interruptible
 
 __all__ = ["Segmented", "shooting_fit", "stage_lengths", "kept_stage", "MAX_SEGMENTS", "GROWTH", "WEIGHT_GROWTH",
            "STAGE_MAX_ITER", "MERGE_RISE", "RESEAT_RATIO", "RESEAT_ROUNDS", "reseat", "NOISE_MARGIN", "NOISE_ORDERS", "NOISE_BANDS", "noise_level", "noise_variance",

@@ -4,7 +4,7 @@ One call of :func:`online_chunk` advances the run over samples ``[t0, t1)``; all
 caller allocates once (:func:`new_state`) and the kernel mutates, so a run can be cut into chunks (progress,
 Ctrl-C) without changing a single number. Two algorithms share the window and the model:
 
-**Window mode** (``tries >= 1``, the default of :class:`flowchart2sdnn.identify.online.OnlineOptions`). The model
+**Window mode** (``tries >= 1``, the default of :class:`flowchart2sdnn.identify.online.run.OnlineOptions`). The model
 runs free with the accepted parameters u and RTRL; every sample's row (``J``, ``e``) enters the FIFO window of Q
 rows together with the network state before that sample. Every ``block`` samples from ``start`` on (fewer
 while the window fills: ``max(min_block, block * rows / Q)``, an iteration costs in proportion to the rows) one
@@ -62,11 +62,11 @@ non-finite model output adopts the trial's parameters and state when they are fi
 the history with zero sensitivities; the sample's row is skipped and the event recorded. Nothing non-finite
 ever enters the window.
 
-Layout: this module holds the state, the per-sample loop and the trial mode; :mod:`.online_window` the window
+Layout: this module holds the state, the per-sample loop and the trial mode; :mod:`.window` the window
 numerics (FIFO sums, the damped step, the window mode's iteration). Both run the network with the offline
 kernels' steps (:mod:`flowchart2sdnn.network.kernels`) and move mu by the offline trainer's schedule
 (:mod:`flowchart2sdnn.fit.damping`). Float state ``fs`` and integer state ``its``: see the ``F_*`` and ``I_*``
-constants of :mod:`.online_window`.
+constants of :mod:`.window`.
 """
 
 from __future__ import annotations
@@ -77,10 +77,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .. import rules
-from ..network.rowops import padded
-from ..network.weight_program import WeightProgram, eval_weights, weight_program  # noqa: F401 - re-exported
-from .online_window import (  # noqa: F401 - re-exported: the run's state layout and window numerics
+from ... import rules
+from ...network.rowops import padded
+from ...network.weight_program import WeightProgram, eval_weights, weight_program  # noqa: F401 - re-exported
+from .window import (  # noqa: F401 - re-exported: the run's state layout and window numerics
     F_CC,
     F_CH,
     F_EE,
