@@ -105,7 +105,8 @@ from flowchart2sdnn.fit.lm import levenberg_marquardt  # noqa: E402
 from flowchart2sdnn.identify.offline.problem import build_problem  # noqa: E402
 from flowchart2sdnn.identify.offline.run import lm_options  # noqa: E402
 from flowchart2sdnn.identify.settings import IdentifySettings  # noqa: E402
-from flowchart2sdnn.identify.shooting.multiple import Segmented, _state_scale  # noqa: E402
+from flowchart2sdnn.identify.shooting.multiple import _state_scale  # noqa: E402
+from flowchart2sdnn.identify.shooting.segmented import Segmented  # noqa: E402
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
 
 

@@ -251,7 +251,7 @@ _BOOK: tuple[Rule, ...] = (
     _r("probe_delta", 1e-7, "state RMS", "The moved start stays linear up to growth_bound.",
        "identify.shooting.auto.DELTA"),
     _r("max_segments", 256, "segments", "The Jacobian has free states x segments extra dense columns.",
-       "identify.shooting.multiple.MAX_SEGMENTS"),
+       "identify.shooting.segmented.MAX_SEGMENTS"),
     _r("segment_growth", 4, "factor", "Segments grow fourfold a stage; a stage's boundaries are the last one's, "
        "so its free starts carry over.", "identify.shooting.multiple.GROWTH",
        flags=("identify --shooting", "diagnose --shooting", "batch --shooting"),
@@ -259,7 +259,7 @@ _BOOK: tuple[Rule, ...] = (
     _r("weight_growth", 10.0, "factor", "The continuity weight grows tenfold a stage.",
        "identify.shooting.multiple.WEIGHT_GROWTH", note="equal to lm_mu_inc by coincidence"),
     _r("dense_fraction", 0.25, "fraction of the columns", "A Jacobian this full is handed to the trainer dense.",
-       "identify.shooting.multiple.DENSE_FRACTION",
+       "identify.shooting.segmented.DENSE_FRACTION",
        note="equal to trust_poor_gain, trust_shrink, linearity_tol by coincidence"),
     _r("stage_max_iter", 100, "iterations", "A stage only warms the next one up.",
        "identify.shooting.multiple.STAGE_MAX_ITER",
@@ -271,11 +271,11 @@ _BOOK: tuple[Rule, ...] = (
     _r("merge_rise", 1.44, "ratio of cost per sample", "A merge that raises the RMS by more than 20 % is "
        "refused.", "identify.shooting.multiple.MERGE_RISE"),
     _r("noise_margin", 2.0, "ratio of RMS", "... from a stage within twice the noise.",
-       "identify.shooting.multiple.NOISE_MARGIN", note="equal to trust_grow, spread_z by coincidence"),
+       "identify.assess.noise.NOISE_MARGIN", note="equal to trust_grow, spread_z by coincidence"),
     _r("noise_orders", (3, 4, 6, 8), "difference orders", "The higher differences the noise is read from "
-       "besides the second.", "identify.shooting.multiple.NOISE_ORDERS"),
+       "besides the second.", "identify.assess.noise.NOISE_ORDERS"),
     _r("noise_bands", 16, "bands", "The frequency bands of the spectral noise reading.",
-       "identify.shooting.multiple.NOISE_BANDS"),
+       "identify.assess.noise.NOISE_BANDS"),
     # --- diagnose ---
     _r("default_split", 0.7, "fraction of the record", "Without validation records, fit on the leading 70 % and "
        "validate on the rest.", "diagnose.fitting.DEFAULT_SPLIT", flags=("diagnose --split",)),

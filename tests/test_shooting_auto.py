@@ -15,10 +15,10 @@ import pytest
 
 import flowchart2sdnn as sd
 from flowchart2sdnn.diagram.validate import load_diagram
+from flowchart2sdnn.identify.assess.noise import noise_level
 from flowchart2sdnn.identify.offline.problem import build_problem
 from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
 from flowchart2sdnn.identify.shooting.auto import GROWTH_BOUND, choose_shooting
-from flowchart2sdnn.identify.shooting.multiple import noise_level
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 
 ROOT = Path(__file__).resolve().parent

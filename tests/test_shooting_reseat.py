@@ -17,7 +17,8 @@ import pytest
 import flowchart2sdnn as sd
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.identify.offline.problem import build_problem
-from flowchart2sdnn.identify.shooting.multiple import Segmented, reseat
+from flowchart2sdnn.identify.shooting.multiple import reseat
+from flowchart2sdnn.identify.shooting.segmented import Segmented
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 
 PENDULUM = Path(__file__).resolve().parent / "data" / "shooting" / "pendulum_plant.yaml"

@@ -15,7 +15,7 @@ from click.testing import CliRunner
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.identify.offline.problem import build_problem
-from flowchart2sdnn.identify.shooting.multiple import Segmented
+from flowchart2sdnn.identify.shooting.segmented import Segmented
 from tests.test_shooting import COULOMB, COULOMB_PLANT, _data, _fd
 
 

@@ -373,7 +373,7 @@ def still_moving(fitted: Fitted) -> list[str]:
 
 def far_above_noise(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings, ratio: float) -> bool:
     """Whether the training residual RMS of `fitted` exceeds `ratio` x the noise read off the records' second
-    differences (:func:`~flowchart2sdnn.identify.shooting.multiple.noise_level`); False where that cannot be told."""
+    differences (:func:`~flowchart2sdnn.identify.assess.noise.noise_level`); False where that cannot be told."""
     problem = _training_problem(fitted, train, settings)
     return problem is not None and _above_noise(fitted, problem, ratio)
 

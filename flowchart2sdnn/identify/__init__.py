@@ -42,10 +42,10 @@ _HOME = {
     "signal_units": "compare",
     # multiple shooting
     "choose_shooting": "shooting.auto", "SUSPECT_PEAK": "shooting.auto",
-    "NOISE_MARGIN": "shooting.multiple", "noise_cost": "shooting.multiple", "noise_level": "shooting.multiple",
     # quasi-online
     "OnlineOptions": "online.run", "quasi_online": "online.run",
     # assessment of a fit
+    "NOISE_MARGIN": "assess.noise", "noise_cost": "assess.noise", "noise_level": "assess.noise",
     "measure_floor": "assess.floor", "pooled_floor": "assess.floor", "lag_zero_warnings": "assess.lagzero",
 }
 

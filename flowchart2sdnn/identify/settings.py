@@ -69,7 +69,7 @@ MIN_REL_COST_CHANGE = rules.value("min_rel_cost_change")
 #: (one unit of -2 log-likelihood = N dE/E), so 0.01 means "1 % of what the data could ever show".
 CONVERGED_DECREASE = rules.value("converged_decrease")
 #: ... and, once the residual RMS is within CRAWL_NOISE of the noise read off the records' second differences
-#: (identify.shooting.multiple.noise_level), when its last CRAWL_ITERATIONS iterations together lowered E by less than
+#: (identify.assess.noise.noise_level), when its last CRAWL_ITERATIONS iterations together lowered E by less than
 #: CRAWL_DECREASE times E/N: one unit of -2 log-likelihood in 100 iterations. A fit at the noise floor that
 #: still creeps is moving along a direction the data barely determine; the three-mass learned chart's draw 9
 #: (benchmarks/bench_rough_init.py, 10 s, seed 1) crept 0.3-0.7 E/N per 100 iterations from iteration 300 to

@@ -43,6 +43,7 @@ from ..assess.evidence import (
 )
 from ..assess.floor import FLOOR_WARN, floor_warnings, measure_floor, oracle_runs
 from ..assess.floorbias import estimate_floor_bias, floor_bias_warnings
+from ..assess.noise import noise_cost
 from ..result import (
     ChartSource,
     Curve,
@@ -70,7 +71,7 @@ from ..settings import (
     IdentifySettings,
 )
 from ..shooting.auto import SUSPECT_PEAK, chaotic_at, choose_shooting, second_look
-from ..shooting.multiple import kept_stage, noise_cost
+from ..shooting.multiple import kept_stage
 from .curvestart import curve_start
 from .initstate import estimate_initial_state
 from .perrecord import per_record_estimates

@@ -44,9 +44,11 @@ from dataclasses import dataclass
 import numpy as np
 
 from ... import rules
+from ..assess.noise import NOISE_MARGIN, noise_cost
 from ..offline.initstate import state_neurons
 from ..offline.problem import Problem
-from .multiple import GROWTH, MAX_SEGMENTS, NOISE_MARGIN, noise_cost, stage_lengths
+from .multiple import GROWTH, stage_lengths
+from .segmented import MAX_SEGMENTS
 
 __all__ = ["ShootingChoice", "choose_shooting", "amplification", "GROWTH_BOUND", "DELTA", "SHORTER", "SUSPECT_PEAK",
            "second_look", "chaotic_at"]
