@@ -10,7 +10,7 @@ fixed at the truth. Two charts:
 * ``coulomb``: diagrams/two_mass_coulomb.yaml (physical Coulomb + viscous terms) on its own plant.
 
 For each draw: (a) ``ours``: LM as `identify` runs it by default (the options of
-:func:`flowchart2sdnn.identify.offline.run.lm_options`, one start); (b) ``trf``: ``scipy.optimize.least_squares(
+:func:`flowchart2sdnn.identify.offline.optimize.lm_options`, one start); (b) ``trf``: ``scipy.optimize.least_squares(
 method='trf', x_scale='jac')`` with the chart's bounds (min: 0 -> positivity) on the SAME residual and RTRL
 Jacobian (`Problem.fun`), so only the optimizer differs. A run "reaches the global minimum" when its cost is
 within 1.05x of the reference: the lowest of a fit started at the truth (both optimizers) and every run.
@@ -109,8 +109,9 @@ from scipy.optimize import least_squares  # noqa: E402
 from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
 from flowchart2sdnn.identify.offline.curvestart import curve_start  # noqa: E402
+from flowchart2sdnn.identify.offline.optimize import lm_options  # noqa: E402
 from flowchart2sdnn.identify.offline.problem import build_problem  # noqa: E402
-from flowchart2sdnn.identify.offline.run import identify, lm_options  # noqa: E402
+from flowchart2sdnn.identify.offline.run import identify  # noqa: E402
 from flowchart2sdnn.identify.offline.workers import run_start  # noqa: E402
 from flowchart2sdnn.identify.settings import IdentifySettings  # noqa: E402
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
@@ -120,7 +121,7 @@ CHARTS = {"learned": ("two_mass", "two_mass_plant"), "coulomb": ("two_mass_coulo
           "three-physical": ("three_mass_physical", "three_mass_stribeck_wide_plant")}
 #: our LM with one change each; "default" is identify's default
 #: ("curve_start": "random" starts the learned curves from the chart's seeded weights, the default before
-#: identify.offline.curvestart; keys "lm_*" are IdentifySettings fields, resolved by identify.offline.run.lm_options as identify
+#: identify.offline.curvestart; keys "lm_*" are IdentifySettings fields, resolved by identify.offline.optimize.lm_options as identify
 #: does; every other key is an LMOptions field set after them). On charts without learned curves the default
 #: keeps the bounds without a transform ("box") with a trust radius; the variants that change the geodesic steps,
 #: the transform's width or the damping schedule start from the bound transform ("lm_bounds": "transform"), the

@@ -102,8 +102,8 @@ sys.path.insert(0, str(ROOT))
 from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
 from flowchart2sdnn.fit.lm import levenberg_marquardt  # noqa: E402
+from flowchart2sdnn.identify.offline.optimize import lm_options  # noqa: E402
 from flowchart2sdnn.identify.offline.problem import build_problem  # noqa: E402
-from flowchart2sdnn.identify.offline.run import lm_options  # noqa: E402
 from flowchart2sdnn.identify.settings import IdentifySettings  # noqa: E402
 from flowchart2sdnn.identify.shooting.multiple import _state_scale  # noqa: E402
 from flowchart2sdnn.identify.shooting.segmented import Segmented  # noqa: E402

@@ -20,8 +20,8 @@ from flowchart2sdnn.identify.offline.curvestart import (
     startable_curves,
     stick_template,
 )
+from flowchart2sdnn.identify.offline.optimize import lm_options
 from flowchart2sdnn.identify.offline.problem import build_problem
-from flowchart2sdnn.identify.offline.run import lm_options
 from flowchart2sdnn.identify.settings import IdentifySettings
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 

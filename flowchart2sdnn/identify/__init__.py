@@ -27,7 +27,7 @@ import importlib
 #: public name -> the module (below this package) it lives in
 _HOME = {
     # the offline fit
-    "identify": "offline.run", "with_floor_bias": "offline.run", "lm_options": "offline.run",
+    "identify": "offline.run", "with_floor_bias": "offline.run", "lm_options": "offline.optimize",
     "Problem": "offline.problem", "build_problem": "offline.problem", "data_init": "offline.problem",
     "metrics": "offline.problem", "required_columns": "offline.problem", "columns_of": "offline.arrays",
     "estimate_initial_state": "offline.initstate", "FitTask": "offline.workers",
@@ -52,14 +52,12 @@ _HOME = {
 __all__ = list(_HOME)
 
 
-def __getattr__(name: str):
-    home = _HOME.get(name)
-    if home is None:
-        raise AttributeError(f"module 'flowchart2sdnn.identify' has no attribute {name!r}")
-    value = getattr(importlib.import_module(f".{home}", __name__), name)
-    globals()[name] = value
-    return value
-
-
 def __dir__() -> list[str]:
     return sorted(set(globals()) | set(__all__))
+
+
+def __getattr__(name: str):
+    """A public name, imported from its module on first use (sys.modules keeps the module)."""
+    if name not in _HOME:
+        raise AttributeError(f"module 'flowchart2sdnn.identify' has no attribute {name!r}")
+    return getattr(importlib.import_module(f".{_HOME[name]}", __name__), name)
