@@ -228,3 +228,13 @@ def test_identify_modules_stay_small():
     assert long <= set(LONG_MODULES), \
         f"split by concern (or name the reason in LONG_MODULES): {sorted((n, lengths[n]) for n in long - set(LONG_MODULES))}"
     assert set(LONG_MODULES) <= long, f"no longer long, drop from LONG_MODULES: {sorted(set(LONG_MODULES) - long)}"
+
+
+@pytest.mark.parametrize("path", [f for f in FILES if _unit(_module_name(f)) != "identify"],
+                         ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_identify_is_imported_through_its_face(path):
+    """diagnose, batch, report, the api and the command line take identify's names from flowchart2sdnn.identify
+    (its __init__), never from the modules inside: those may move without their users noticing."""
+    inner = [f"line {line}: {target}" for line, target in _imports(path)
+             if target.startswith("flowchart2sdnn.identify.")]
+    assert not inner, f"{path.relative_to(PACKAGE)} imports identify's modules (import from the face): {inner}"
