@@ -72,7 +72,8 @@ def _candidates(report: dict, limit: int) -> list[str]:
 def _rounds(report: dict) -> list[str]:
     rows = [[r["round"], _effect(r), "yes" if r["accepted"] else "no", _arrow(r["rms_before"], r["rms_after"]),
              _arrow(r["validation_rms_before"], r["validation_rms_after"]),
-             _arrow(r["aic_before"], r["aic_after"], 8), fit_percent_change(r.get("before") or {}, r.get("after") or {})]
+             _arrow(r["aic_before"], r["aic_after"], 8),
+             fit_percent_change(r.get("before") or {}, r.get("after") or {})]
             for r in report["rounds"]]
     parts = [table(["round", "effect", "accepted", "train RMS", "validation RMS", "AIC", "val fit %"], rows,
                    left=3)] if rows else []
