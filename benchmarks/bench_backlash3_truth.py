@@ -6,7 +6,7 @@ trainlm damping, the bound transform, 1000 iterations, single shooting, no bias 
 record of seed s (30 s, 0.01 rad/s noise, `sdnn excite` of tests/data/diagnose/three_mass_backlash_plant.yaml)
 from the **true** parameters (the gap at the plant's 4 mrad). Printed: the training cost E at the truth and at
 the minimum the fit reaches, the viscous b's errors with their noise-only and bias-widened 95 % intervals
-(identify.run.with_floor_bias, what diagnose's `final` reports), the corrected values (identified - beta), the
+(identify.offline.run.with_floor_bias, what diagnose's `final` reports), the corrected values (identified - beta), the
 b1-b2 correlation. When the end point diagnose reports has the same E, that is the record's and the network's
 minimum, not an unconverged refit. `--noise 0` and `--substeps N` separate the noise's part from the network
 step's (benchmarks/notes/diagnose.md, "Three-mass seed 2").
@@ -40,8 +40,8 @@ from flowchart2sdnn.diagnose.fitting import DiagnoseSettings  # noqa: E402
 from flowchart2sdnn.diagnose.graph import spring_angles  # noqa: E402
 from flowchart2sdnn.diagram.dump import with_values  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
-from flowchart2sdnn.identify.problem import build_problem  # noqa: E402
-from flowchart2sdnn.identify.run import IdentifySettings, identify, with_floor_bias  # noqa: E402
+from flowchart2sdnn.identify.offline.problem import build_problem  # noqa: E402
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify, with_floor_bias  # noqa: E402
 
 
 def final_chart(substeps):

@@ -19,7 +19,7 @@ Measured with the default (auto; benchmarks/notes/identification.md, "Long chaot
 parameters within 0.02 % (seed 1, 12 s; seeds 3, 5, 7: at most 1.12x the noise, 0.04 %, 6-39 s); backlash, seeds 1, 3, ..., 15:
 validation within 1.2x on both outputs for seven (0.97-1.18x), seed 9 at 1.34x/1.11x (the truth on that record
 1.04x), linear parameters within 1.2 % on all eight, 33-196 s (auto chose off on seeds 5-15 and its second look
-fitted them; identify.shootauto). With the box bounds and trust radius (identify's default on these charts since
+fitted them; identify.shooting.auto). With the box bounds and trust radius (identify's default on these charts since
 27 Nov 2026): all eight backlash seeds within 1.2x (seed 9 1.197x/1.093x), linear parameters within 0.75 %, 63-324 s.
 What is reachable on the 3 s validation: the truth as the chart (no fit) misses it by 0.0106/0.0106 at N = 6
 (auto's), 0.0099/0.0101 at N = 32; the continuous oracle by 0.0099/0.0100 (the noise). A parameter 0.3 % off

@@ -37,7 +37,7 @@ from flowchart2sdnn.diagram.curves import BASIS_FUNCTIONS  # noqa: E402
 from flowchart2sdnn.diagram.model import Block, Term  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
 from flowchart2sdnn.fit.lm import CONVERGED_STATUSES  # noqa: E402
-from flowchart2sdnn.identify.run import identify  # noqa: E402
+from flowchart2sdnn.identify.offline.run import identify  # noqa: E402
 from flowchart2sdnn.identify.settings import IdentifySettings  # noqa: E402
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
 

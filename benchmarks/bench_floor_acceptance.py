@@ -34,8 +34,8 @@ sys.path.insert(0, str(ROOT))
 
 from flowchart2sdnn.api import dataset_from_frame, identify  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
-from flowchart2sdnn.identify.floorbias import estimate_floor_bias  # noqa: E402
-from flowchart2sdnn.identify.run import lm_options  # noqa: E402
+from flowchart2sdnn.identify.assess.floorbias import estimate_floor_bias  # noqa: E402
+from flowchart2sdnn.identify.offline.optimize import lm_options  # noqa: E402
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
 
 BENCHES = {"two": ("two_mass_coulomb_plant", "two_mass_coulomb"), "three": ("three_mass_plant", "three_mass")}

@@ -1,7 +1,7 @@
 """Quasi-online LM on the paper's run: 100 s at 1 kHz, Q = 25 000 (section 3.1, 6).
 
 The default window mode runs one exact LM iteration on the last Q samples every 500 samples (a window
-simulation per trial, an RTRL pass over the window per accepted iteration; flowchart2sdnn/identify/online_kernel.py).
+simulation per trial, an RTRL pass over the window per accepted iteration; flowchart2sdnn/identify/online/kernel.py).
 Measures the real-time factor (record length / wall time; target >= 20x), the GFLOP/s of the per-sample part
 against the flop count below (that of the former trial mode, ``OnlineOptions(tries=0)``, one LM step per sample;
 the window mode's window passes come on top and are not counted), and the peak memory (tracemalloc: every numpy allocation of the run) for Q = 5000 / 25 000 and
@@ -45,7 +45,7 @@ sys.path.insert(0, str(ROOT))
 
 from flowchart2sdnn.compiler import compile_diagram, compile_file  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
-from flowchart2sdnn.identify.online import OnlineOptions, quasi_online  # noqa: E402
+from flowchart2sdnn.identify.online.run import OnlineOptions, quasi_online  # noqa: E402
 from flowchart2sdnn.network.runtime import CompiledNetwork  # noqa: E402
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
 

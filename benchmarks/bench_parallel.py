@@ -25,8 +25,8 @@ import numpy as np
 from flowchart2sdnn.data.csvdata import Dataset, read_csv, write_csv
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.executors import ProcessExecutor
-from flowchart2sdnn.identify.problem import required_columns
-from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.identify.offline.problem import required_columns
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 REPO = Path(__file__).resolve().parents[1]

@@ -10,7 +10,7 @@ fixed at the truth. Two charts:
 * ``coulomb``: diagrams/two_mass_coulomb.yaml (physical Coulomb + viscous terms) on its own plant.
 
 For each draw: (a) ``ours``: LM as `identify` runs it by default (the options of
-:func:`flowchart2sdnn.identify.run.lm_options`, one start); (b) ``trf``: ``scipy.optimize.least_squares(
+:func:`flowchart2sdnn.identify.offline.optimize.lm_options`, one start); (b) ``trf``: ``scipy.optimize.least_squares(
 method='trf', x_scale='jac')`` with the chart's bounds (min: 0 -> positivity) on the SAME residual and RTRL
 Jacobian (`Problem.fun`), so only the optimizer differs. A run "reaches the global minimum" when its cost is
 within 1.05x of the reference: the lowest of a fit started at the truth (both optimizers) and every run.
@@ -81,7 +81,7 @@ once on the shared 2-core machine (load average 3.5-4: seconds 2-3× a quiet mac
 | three-learned, 30 s, crawl rule (27 Nov, draws 0-9 and 10-19 at once) | 19/20 (ref 4.4766) | 4.477-4.506 (draw 3: 81 150, shafts locked by the curves' brief fit; identify() itself, with its second look, ends at 4.47677) | 20/20 | 345 (109-660) | 145 | the bᵢ −6…+18 %; J, c within 0.05 %, d within 0.7 % |
 | three-learned before the step fix (plain steps), N = 7 | 6/7 (ref 1.475) | 1.475-1.805 | 1/7 | 1150 (856-1150) | 149 (112-191) | b1 +352 %, b2 −100 % |
 
-``--shooting L`` adds our default LM with multiple shooting (identify.shooting). learned, 10 s, N = 4, seed 1,
+``--shooting L`` adds our default LM with multiple shooting (identify.shooting.multiple). learned, 10 s, N = 4, seed 1,
 ``--shooting 250`` (stages 250/1000/4000, then single shooting): 0/4 against 1/4 single shooting (costs 1.35-13.2
 against 1.27-1.46; one final stage at the 1000 limit), median 23.7 s against 6.6 s: the learned chart's local
 minima (d traded against the learned curves' slopes) are not the long-horizon kind that shooting removes.
@@ -108,11 +108,12 @@ from scipy.optimize import least_squares  # noqa: E402
 
 from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
-from flowchart2sdnn.identify.curvestart import curve_start  # noqa: E402
-from flowchart2sdnn.identify.problem import build_problem  # noqa: E402
-from flowchart2sdnn.identify.run import identify, lm_options  # noqa: E402
+from flowchart2sdnn.identify.offline.curvestart import curve_start  # noqa: E402
+from flowchart2sdnn.identify.offline.optimize import lm_options  # noqa: E402
+from flowchart2sdnn.identify.offline.problem import build_problem  # noqa: E402
+from flowchart2sdnn.identify.offline.run import identify  # noqa: E402
+from flowchart2sdnn.identify.offline.workers import run_start  # noqa: E402
 from flowchart2sdnn.identify.settings import IdentifySettings  # noqa: E402
-from flowchart2sdnn.identify.workers import run_start  # noqa: E402
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
 
 CHARTS = {"learned": ("two_mass", "two_mass_plant"), "coulomb": ("two_mass_coulomb", "two_mass_coulomb_plant"),
@@ -120,7 +121,7 @@ CHARTS = {"learned": ("two_mass", "two_mass_plant"), "coulomb": ("two_mass_coulo
           "three-physical": ("three_mass_physical", "three_mass_stribeck_wide_plant")}
 #: our LM with one change each; "default" is identify's default
 #: ("curve_start": "random" starts the learned curves from the chart's seeded weights, the default before
-#: identify.curvestart; keys "lm_*" are IdentifySettings fields, resolved by identify.run.lm_options as identify
+#: identify.offline.curvestart; keys "lm_*" are IdentifySettings fields, resolved by identify.offline.optimize.lm_options as identify
 #: does; every other key is an LMOptions field set after them). On charts without learned curves the default
 #: keeps the bounds without a transform ("box") with a trust radius; the variants that change the geodesic steps,
 #: the transform's width or the damping schedule start from the bound transform ("lm_bounds": "transform"), the

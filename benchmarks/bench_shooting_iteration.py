@@ -6,7 +6,7 @@ Q = 25 000 samples, the issue's size). Both fits are identify's default LM (``lm
 problem, run for ``--iterations`` iterations from the chart's `init` with the convergence tests off, so both do
 the same kind of work: one residual and Jacobian (RTRL) per accepted step, one residual per trial, the damped
 normal equations. Single shooting is `Problem.fun`; multiple shooting is the first stage of
-identify.shooting (`Segmented`, continuity weight 1) at each ``--length`` L, its segments on one thread and on
+identify.shooting.multiple (`Segmented`, continuity weight 1) at each ``--length`` L, its segments on one thread and on
 ``--threads``. Printed: seconds per iteration and the ratio to single shooting, measured in the same run (the
 issue asks for at most 1.5 at Q = 25 000), and the seconds of one Jacobian and two residuals (an iteration's
 simulation work without its count of rejected trials, which differs between the runs).
@@ -102,10 +102,11 @@ sys.path.insert(0, str(ROOT))
 from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
 from flowchart2sdnn.fit.lm import levenberg_marquardt  # noqa: E402
-from flowchart2sdnn.identify.problem import build_problem  # noqa: E402
-from flowchart2sdnn.identify.run import lm_options  # noqa: E402
+from flowchart2sdnn.identify.offline.optimize import lm_options  # noqa: E402
+from flowchart2sdnn.identify.offline.problem import build_problem  # noqa: E402
 from flowchart2sdnn.identify.settings import IdentifySettings  # noqa: E402
-from flowchart2sdnn.identify.shooting import Segmented, _state_scale  # noqa: E402
+from flowchart2sdnn.identify.shooting.multiple import _state_scale  # noqa: E402
+from flowchart2sdnn.identify.shooting.segmented import Segmented  # noqa: E402
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
 
 

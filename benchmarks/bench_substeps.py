@@ -31,7 +31,7 @@ from flowchart2sdnn.api import dataset_from_frame  # noqa: E402
 from flowchart2sdnn.compiler import compile_diagram  # noqa: E402
 from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt  # noqa: E402
-from flowchart2sdnn.identify.problem import build_problem  # noqa: E402
+from flowchart2sdnn.identify.offline.problem import build_problem  # noqa: E402
 from flowchart2sdnn.network.alignment import run_aligned  # noqa: E402
 from flowchart2sdnn.network.runtime import CompiledNetwork  # noqa: E402
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402

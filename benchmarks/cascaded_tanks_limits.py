@@ -28,8 +28,8 @@ import numpy as np
 
 from flowchart2sdnn.api import identify, load_chart, read_csv
 from flowchart2sdnn.compiler import compile_diagram
-from flowchart2sdnn.identify.initstate import estimate_initial_state
-from flowchart2sdnn.identify.problem import data_init
+from flowchart2sdnn.identify.offline.initstate import estimate_initial_state
+from flowchart2sdnn.identify.offline.problem import data_init
 from flowchart2sdnn.network.alignment import run_aligned
 from flowchart2sdnn.network.runtime import CompiledNetwork
 

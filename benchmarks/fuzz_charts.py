@@ -347,8 +347,8 @@ def identify_case(diagram, network, path: Path) -> None:
     import numpy as np
 
     from flowchart2sdnn.data.csvdata import read_csv, write_csv
-    from flowchart2sdnn.identify.problem import required_columns
-    from flowchart2sdnn.identify.run import IdentifySettings, identify
+    from flowchart2sdnn.identify.offline.problem import required_columns
+    from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
 
     rng = np.random.default_rng(len(network.weights))
     cols = required_columns(diagram)

@@ -36,8 +36,8 @@ from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.data.csvdata import read_csv
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
 from flowchart2sdnn.diagram.validate import load_diagram
-from flowchart2sdnn.identify.problem import metrics
-from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.identify.offline.problem import metrics
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
 from flowchart2sdnn.network.alignment import run_aligned
 from flowchart2sdnn.network.runtime import CompiledNetwork
 

@@ -77,8 +77,8 @@ def protocol(chart, train, test, starts: int = 1, seed: int = 0, fit: bool = Tru
 
 def error_by_stretch(result, test, seconds: float = 5.0) -> list[float]:
     """RMS position error (mm) of the protocol's free run on consecutive stretches of the test record."""
-    from flowchart2sdnn.identify.initstate import estimate_initial_state
-    from flowchart2sdnn.identify.problem import columns_of
+    from flowchart2sdnn.identify.offline.initstate import estimate_initial_state
+    from flowchart2sdnn.identify.offline.problem import columns_of
     from flowchart2sdnn.network.alignment import run_aligned
 
     compiled, x = result._network()

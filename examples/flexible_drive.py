@@ -5,7 +5,7 @@ The data (16 open-loop records, voltage in, both cart speeds out, 1 kHz) are rea
 
 Protocol (benchmarks/notes/real_flexible_drive.md has the results):
 
-* train on ``square_2V`` alone with :func:`flowchart2sdnn.identify.run.identify` (exactly what
+* train on ``square_2V`` alone with :func:`flowchart2sdnn.identify.offline.run.identify` (exactly what
   ``sdnn identify CHART square_2V.csv --map u=u_V --map v1=v1_cart1_mm_s --map v2=v2_cart2_mm_s``
   does), and, as a second protocol, on ``square_2V`` + ``sine_4Hz`` together (a stacked fit, see
   :func:`fit_stacked`: the library trains on one record only);
@@ -38,8 +38,8 @@ from flowchart2sdnn.diagram.model import Diagram
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.fit.uncertainty import covariance
-from flowchart2sdnn.identify.problem import Problem, build_problem, metrics, required_columns
-from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.identify.offline.problem import Problem, build_problem, metrics, required_columns
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
 from flowchart2sdnn.network.runtime import CompiledNetwork
 from flowchart2sdnn.network.stability import rest_eigenvalues
 from flowchart2sdnn.tables import table
@@ -165,7 +165,7 @@ def fit_stacked(diagram: Diagram, records: Mapping[str, Dataset], train: Sequenc
 
     Each record runs from its own measured initial speeds. This uses the library's pieces (build_problem,
     levenberg_marquardt, covariance) because `identify` takes one training record. The guard refuses any
-    network unstable at rest, not only a chattering one: the library's guard (identify.problem.guard, via
+    network unstable at rest, not only a chattering one: the library's guard (identify.offline.problem.guard, via
     network.stability.chatter_radius) ignores real eigenvalues > 1, i.e. a learned friction curve with a
     negative slope at zero, on which the RTRL Jacobian explodes (see benchmarks/notes/real_flexible_drive.md).
     """

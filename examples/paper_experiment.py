@@ -16,9 +16,9 @@ Offline, stage 2 follows a staged recipe (docs/paper_experiment.md says why): (a
 multi-start acts here), (b) on the first 3 s, (c) restart the learned curve from its initial weights and fit it
 alone on the whole record with the physical parameters held (up to 4 starts with a multi-start), (d) fit
 everything on the whole record. Stage 1 is one fit on the whole record (the multi-start draws there). Every
-step is Levenberg-Marquardt as in ``sdnn identify`` (fit.lm, fit.multistart, identify.problem), except that
+step is Levenberg-Marquardt as in ``sdnn identify`` (fit.lm, fit.multistart, identify.offline.problem), except that
 the first damping is scaled to the problem as ``identify`` does it (mu0 = TAU * max diag(J^T J));
-the final values go through :func:`flowchart2sdnn.identify.run.identify` once more (no iteration) for the
+the final values go through :func:`flowchart2sdnn.identify.offline.run.identify` once more (no iteration) for the
 result document. Quasi-online runs are plain ``identify(..., online=True)``.
 
 Every learned friction curve is scored against the plant's true friction
@@ -57,8 +57,8 @@ from flowchart2sdnn.diagram.validate import load_diagram  # noqa: E402
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt  # noqa: E402
 from flowchart2sdnn.fit.multistart import draw_starts, run_multistart  # noqa: E402
 from flowchart2sdnn.identify.document import fix_from_result  # noqa: E402
-from flowchart2sdnn.identify.problem import Problem, build_problem, required_columns  # noqa: E402
-from flowchart2sdnn.identify.run import IdentifySettings, identify  # noqa: E402
+from flowchart2sdnn.identify.offline.problem import Problem, build_problem, required_columns  # noqa: E402
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify  # noqa: E402
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite  # noqa: E402
 
 REPO = Path(__file__).resolve().parents[1]
@@ -179,7 +179,7 @@ def staged_identify(chart: Diagram, data: Dataset, steps: Sequence[Step], starts
                     max_iter: int = 60, tau: float = TAU, log: Callable[[str], None] = lambda s: None):
     """Run `steps` one after the other, each starting from the values the previous one found.
 
-    Returns the :class:`~flowchart2sdnn.identify.run.Identification` of the chart with the final values on
+    Returns the :class:`~flowchart2sdnn.identify.offline.run.Identification` of the chart with the final values on
     the whole record (the result document of ``sdnn identify``; no further iteration) and the step log.
     """
     initial = _initial_curves(chart, seed)
@@ -274,7 +274,7 @@ def run_fit(run: Run, chart: Diagram, data: Dataset, curve: str, truth: Callable
             log: Callable[[str], None] = print) -> Run:
     """Fit `chart` as `run.mode` says, score it against the truth, save RESULT.json and the identified chart.
 
-    ``sdnn identify``: :func:`~flowchart2sdnn.identify.run.identify` with the CLI's defaults (what the command
+    ``sdnn identify``: :func:`~flowchart2sdnn.identify.offline.run.identify` with the CLI's defaults (what the command
     line does); staged: :func:`staged_identify` with `steps`; quasi-online: ``identify --online`` with
     Q = K = 25 000.
     """

@@ -25,8 +25,8 @@ from ._version import __version__
 
 # The subpackages identify/ and diagnose/ are imported above (cheap: their modules load on first use); their
 # names are then taken back so that `identify` and `diagnose` here are the functions of api.py (loaded on first
-# use by __getattr__, with their own docstrings and signatures for help()). Reach the subpackages' modules with
-# `from flowchart2sdnn.identify import run`.
+# use by __getattr__, with their own docstrings and signatures for help()). Reach identify's names through its
+# face, `from flowchart2sdnn.identify import Problem` (flowchart2sdnn/identify/__init__.py).
 del globals()["identify"], globals()["diagnose"]
 
 __all__ = [

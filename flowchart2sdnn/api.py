@@ -32,9 +32,8 @@ from .diagnose.loop import diagnose as _diagnose
 from .diagram.model import Diagram
 from .diagram.validate import load_diagram
 from .errors import Diagnostic, SdnnError, did_you_mean
-from .identify.document import read_result
-from .identify.result import Identification
-from .identify.run import identify as _identify
+from .identify import Identification, read_result
+from .identify import identify as _identify
 
 __all__ = ["load_chart", "compile_chart", "read_csv", "dataset_from_frame", "identify", "diagnose", "read_result",
            "read_report"]
@@ -85,7 +84,7 @@ def read_csv(path: str | Path, map: Mapping[str, str] | None = None, chart: Diag
     if chart is not None:
         diagram = _chart(chart)
         from .analysis.dataunits import unit_scales
-        from .identify.problem import required_columns
+        from .identify import required_columns
 
         scale = unit_scales(diagram, units or {}, mapping)
         return _read_csv_columns(path, required_columns(diagram), mapping, sample_time, scale=scale, **dialect)
@@ -180,7 +179,7 @@ def identify(chart: Diagram | str | Path, data: Dataset | Sequence[Dataset], val
     """
     diagram = _chart(chart)
     if fix_from is not None:
-        from .identify.document import fix_from_result
+        from .identify import fix_from_result
 
         diagram, fixed = fix_from_result(diagram, fix_from)
         settings.setdefault("fixed_from", tuple(fixed))
@@ -258,7 +257,7 @@ def prepared(diagram: Diagram, data: Dataset | Sequence[Dataset], validation: Da
 def _records(diagram: Diagram, data, what: str) -> list[Dataset]:
     """`data` (a record or a sequence of records) as a list, each checked: a record (not a DataFrame, a mapping
     or a path) holding every column the chart reads."""
-    from .identify.problem import required_columns
+    from .identify import required_columns
 
     items = [data] if isinstance(data, Dataset) or _not_a_sequence(data) else list(data)
     needed = required_columns(diagram)
@@ -296,9 +295,9 @@ def _not_a_record(item, what: str) -> Diagnostic:
 
 def with_data_notes(ident: Identification, records: Sequence[Dataset]) -> Identification:
     """`ident` with the records' data notes (time base, delimiter) before its own warnings, and after them the
-    warning of a residual that follows a held input at lag 0 (identify.lagzero)."""
+    warning of a residual that follows a held input at lag 0 (identify.assess.lagzero)."""
     from .data.timebase import record_notices
-    from .identify.lagzero import lag_zero_warnings
+    from .identify import lag_zero_warnings
     from .notices import messages
 
     notes = record_notices(records)

@@ -14,7 +14,8 @@ from flowchart2sdnn.cli import terminal
 from flowchart2sdnn.cli.terminal import Progress
 from flowchart2sdnn.data.csvdata import write_csv
 from flowchart2sdnn.diagram.validate import load_diagram
-from flowchart2sdnn.identify.run import identify, iteration_text
+from flowchart2sdnn.identify.offline.optimize import iteration_text
+from flowchart2sdnn.identify.offline.run import identify
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -87,12 +87,14 @@ def test_a_settings_error_is_a_usage_error_naming_the_flag():
 
 
 def test_identify_maps_its_settings_errors_to_its_flags(tmp_path, monkeypatch):
-    from flowchart2sdnn.identify import run
+    import importlib
+
+    face = importlib.import_module("flowchart2sdnn.identify")  # where the command takes IdentifySettings from
 
     def refuse(**kwargs):
         raise ValueError("starts must be at least 1")
 
-    monkeypatch.setattr(run, "IdentifySettings", refuse)
+    monkeypatch.setattr(face, "IdentifySettings", refuse)
     data = tmp_path / "d.csv"
     data.write_text("time,w1,w2\n" + "".join(f"{k * 0.001:.3f},{k % 3},{k % 5}\n" for k in range(20)))
     res = CliRunner().invoke(main, ["identify", str(data), "--diagram", str(LAG), "--quiet"])

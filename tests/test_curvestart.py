@@ -1,4 +1,4 @@
-"""identify.curvestart: the learned curves' stick-slip start, against hand-derived oracles.
+"""identify.offline.curvestart: the learned curves' stick-slip start, against hand-derived oracles.
 
 Oracle for the slope limit: one inertia with a learned friction curve, explicit Euler at step T,
 w(t) = w(t-1) + T/J (M - f(w(t-1))), has the rest eigenvalue 1 - T f'(0) / J: it chatters (< -1) from
@@ -13,15 +13,15 @@ import pytest
 
 from flowchart2sdnn.api import dataset_from_frame
 from flowchart2sdnn.diagram.validate import diagram_from_text
-from flowchart2sdnn.identify.curvestart import (
+from flowchart2sdnn.identify.offline.curvestart import (
     STICK_FRACTION,
     curve_start,
     slope_limit,
     startable_curves,
     stick_template,
 )
-from flowchart2sdnn.identify.problem import build_problem
-from flowchart2sdnn.identify.run import lm_options
+from flowchart2sdnn.identify.offline.optimize import lm_options
+from flowchart2sdnn.identify.offline.problem import build_problem
 from flowchart2sdnn.identify.settings import IdentifySettings
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
@@ -153,7 +153,7 @@ def test_with_sub_steps_the_step_is_set_from_the_limit_of_the_network_step(recor
 
 
 def test_identify_reports_the_curves_start_and_random_keeps_the_chart_start(record):
-    from flowchart2sdnn.identify.run import identify
+    from flowchart2sdnn.identify.offline.run import identify
 
     diagram = diagram_from_text(chart(0.5), "chart.yaml")
     stick = identify(diagram, record, seed=1, floor_bias=False)
@@ -176,7 +176,7 @@ def test_three_mass_learned_chart_reaches_the_noise_floor_from_the_truth():
     # 1/2 * rows * 3 * 0.01^2 (the noise excite adds). The curves enter linearly: no stick-slip start is needed
     # and the fit ends within tens of iterations.
     from flowchart2sdnn.diagram.validate import load_diagram
-    from flowchart2sdnn.identify.run import identify
+    from flowchart2sdnn.identify.offline.run import identify
 
     root = __import__("pathlib").Path(__file__).resolve().parents[1] / "diagrams"
     plant = load_diagram(root / "three_mass_stribeck_plant.yaml")

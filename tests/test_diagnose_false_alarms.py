@@ -74,7 +74,7 @@ def test_metrics_parts_sum_the_squared_error():
 
     from flowchart2sdnn.compiler import compile_diagram
     from flowchart2sdnn.diagram.validate import load_diagram
-    from flowchart2sdnn.identify.problem import metrics
+    from flowchart2sdnn.identify.offline.problem import metrics
     from flowchart2sdnn.network.alignment import run_aligned
     from flowchart2sdnn.network.runtime import CompiledNetwork
     sys.path.insert(0, str(Path(__file__).resolve().parent))

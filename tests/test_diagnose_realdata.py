@@ -16,7 +16,7 @@ from diagnose_bench import DATA, REAL
 from flowchart2sdnn.data.csvdata import read_csv
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
 from flowchart2sdnn.diagram.validate import load_diagram
-from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
 
 pytestmark = [pytest.mark.slow, pytest.mark.realdata,
               pytest.mark.skipif(not REAL.is_dir(), reason="../shared/data/real is absent")]

@@ -16,7 +16,7 @@ from scipy.linalg import lstsq
 from flowchart2sdnn.diagnose.effects import Damping, DeadTime, Friction
 from flowchart2sdnn.diagnose.graph import Place, speeds
 from flowchart2sdnn.diagnose.score import Candidate, gauss_newton_decrease, new_quantities, screen, screened
-from flowchart2sdnn.identify.problem import build_problem
+from flowchart2sdnn.identify.offline.problem import build_problem
 
 
 def _lstsq_decrease(J, e):

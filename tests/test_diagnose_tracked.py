@@ -28,7 +28,7 @@ from flowchart2sdnn.diagnose.tracked import (
     score_rows,
     tracked_rows,
 )
-from flowchart2sdnn.identify.shooting import NOISE_MARGIN
+from flowchart2sdnn.identify.assess.noise import NOISE_MARGIN
 
 NOISE = 0.01
 SETTINGS = DiagnoseSettings()

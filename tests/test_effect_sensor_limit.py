@@ -21,8 +21,8 @@ from flowchart2sdnn.diagnose.graph import Place
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose
 from flowchart2sdnn.diagram.dump import dump_diagram
 from flowchart2sdnn.diagram.validate import diagram_from_text
-from flowchart2sdnn.identify.initstate import estimate_initial_state
-from flowchart2sdnn.identify.problem import data_init
+from flowchart2sdnn.identify.offline.initstate import estimate_initial_state
+from flowchart2sdnn.identify.offline.problem import data_init
 from flowchart2sdnn.network.runtime import CompiledNetwork
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 from flowchart2sdnn.simulate.run import simulate_chart

@@ -1,4 +1,4 @@
-"""A fit whose residual is far above the records' noise says so (identify.run._far_above_noise).
+"""A fit whose residual is far above the records' noise says so (identify.offline.run._far_above_noise).
 
 Oracle: the record's own, known content. The continuous plant's record at 0.01 rad/s noise is fitted by its own
 chart (the residual at the noise: no warning); the same record with a slow 0.2 rad/s sine added to w2, which no
@@ -14,7 +14,7 @@ import pytest
 
 from flowchart2sdnn.api import dataset_from_frame
 from flowchart2sdnn.diagram.validate import load_diagram
-from flowchart2sdnn.identify.run import identify
+from flowchart2sdnn.identify.offline.run import identify
 from flowchart2sdnn.identify.settings import IdentifySettings
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 

@@ -17,8 +17,8 @@ import pytest
 import flowchart2sdnn as sd
 from flowchart2sdnn.compiler.substeps import AUTO_CAP
 from flowchart2sdnn.diagram.validate import load_diagram
+from flowchart2sdnn.identify.assess.floor import FLOOR_WARN
 from flowchart2sdnn.identify.document import from_document
-from flowchart2sdnn.identify.floor import FLOOR_WARN
 from flowchart2sdnn.report.identify_text import format_result
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
@@ -153,7 +153,7 @@ def test_diagnose_credits_no_effect_with_the_floor():
 
 def test_floor_never_writes_a_non_finite_number(monkeypatch):
     """A run whose values are finite but whose squares overflow (the chart fuzzer's gain -23183) skips the floor."""
-    from flowchart2sdnn.identify import floor as F
+    from flowchart2sdnn.identify.assess import floor as F
 
     monkeypatch.setattr(F, "_one", lambda *a, **k: np.array([[1e200, 0.0]]))
     out = F.measure_floor(None, type("C", (), {"net": type("N", (), {"substeps": 1})(),

@@ -1,4 +1,4 @@
-"""The discretization's bias on each parameter (identify.floorbias) and the intervals widened by it.
+"""The discretization's bias on each parameter (identify.assess.floorbias) and the intervals widened by it.
 
 Oracle: on noise-free data from the continuous plant the parameters that explain the data are the plant's own
 (the truth); a fit's error there is the discretization's bias alone. The corrected estimate (identified - beta)
@@ -19,9 +19,9 @@ from click.testing import CliRunner
 import flowchart2sdnn as sd
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.diagram.validate import load_diagram
+from flowchart2sdnn.identify.assess.floorbias import BIAS_WARN
 from flowchart2sdnn.identify.document import from_document
-from flowchart2sdnn.identify.floorbias import BIAS_WARN
-from flowchart2sdnn.identify.run import with_floor_bias
+from flowchart2sdnn.identify.offline.run import with_floor_bias
 from flowchart2sdnn.report.identify_text import format_result
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
@@ -149,7 +149,7 @@ def test_an_unconverged_refit_continues_and_warns_only_while_beta_moves(clean, m
     """With 1 iteration the N = 1 refit (4 to converge with the default bounds in the box, 8 with the transform)
     stops unconverged: it runs 1 more, reports how far beta moved, and warns since it moved more than
     BETA_SETTLED; the default refit converges and does not warn."""
-    from flowchart2sdnn.identify import floorbias
+    from flowchart2sdnn.identify.assess import floorbias
 
     chart = dataclasses.replace(PLANT, substeps=1, delays="torques")
     settled = sd.identify(chart, clean, max_iter=50)

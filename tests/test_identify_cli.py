@@ -23,7 +23,7 @@ from flowchart2sdnn import __version__
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.data.csvdata import write_csv
 from flowchart2sdnn.diagram.validate import load_diagram
-from flowchart2sdnn.identify.run import IdentifySettings
+from flowchart2sdnn.identify.offline.run import IdentifySettings
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 ROOT = Path(__file__).resolve().parents[1]

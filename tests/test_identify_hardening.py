@@ -20,8 +20,8 @@ from flowchart2sdnn.data.csvdata import read_csv, write_csv
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
 from flowchart2sdnn.fit.lm import STATUS_MESSAGES
-from flowchart2sdnn.identify.problem import required_columns
-from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.identify.offline.problem import required_columns
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 from flowchart2sdnn.strictjson import strict_json
 
@@ -130,8 +130,8 @@ def test_a_start_that_makes_the_model_diverge_is_one_clear_line_and_no_file(data
 
 
 def test_an_unstable_but_finite_start_ends_with_a_usable_result(data):
-    # single shooting's own handling of the growing start (auto would cut the record: identify.shootauto), from
-    # the chart's random curves (the default stick-slip start, identify.curvestart, damps the feedback g away)
+    # single shooting's own handling of the growing start (auto would cut the record: identify.shooting.auto), from
+    # the chart's random curves (the default stick-slip start, identify.offline.curvestart, damps the feedback g away)
     outcome, r = _fit(data / "feedback.yaml", data / "engine.csv", max_iter=25, shooting="off", curve_start="random")
     history = r["optimizer"]["cost_history"]
     assert history[0] > 1e15  # the start grows like (1 + T g / J1)^k over 3000 samples

@@ -24,7 +24,7 @@ import pytest
 from flowchart2sdnn.data.csvdata import read_csv, write_csv
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
-from flowchart2sdnn.identify.problem import build_problem, required_columns
+from flowchart2sdnn.identify.offline.problem import build_problem, required_columns
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 ROOT = Path(__file__).resolve().parents[1]

@@ -8,7 +8,7 @@ import pytest
 from flowchart2sdnn.data.csvdata import read_csv, write_csv
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
-from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
 from flowchart2sdnn.network.alignment import run_aligned
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 

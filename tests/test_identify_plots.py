@@ -14,8 +14,8 @@ from click.testing import CliRunner
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.data.csvdata import read_csv, write_csv
 from flowchart2sdnn.diagram.validate import load_diagram
-from flowchart2sdnn.identify.problem import required_columns
-from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.identify.offline.problem import required_columns
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 ROOT = Path(__file__).resolve().parents[1]

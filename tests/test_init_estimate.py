@@ -93,7 +93,7 @@ def test_the_start_of_a_twisted_shaft_is_estimated_with_its_interval(twisted_rec
     # the same chart started untwisted cannot follow the first oscillation: its fit is clearly worse
     plain = sd.identify(diagram_from_text(_chart_text(0), "zero.yaml"), twisted_record)
     assert max(plain.fit.train.rms.values()) > 1.5 * max(fitted.fit.train.rms.values())
-    # its misfit is the start's, not chaos: auto's second look (identify.shootauto.second_look) keeps the multiple-
+    # its misfit is the start's, not chaos: auto's second look (identify.shooting.auto.second_look) keeps the multiple-
     # shooting retry only where the chart at its fit grows a moved start 1000-fold, which this stable drive does not
     look = plain.extra["shooting"]["auto"]["second_look"]
     assert look["chaotic_at_fit"] is False and look["kept"] == "single shooting"

@@ -19,7 +19,7 @@ from flowchart2sdnn.cli import main
 from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
-from flowchart2sdnn.identify.initstate import estimate_initial_state, state_neurons
+from flowchart2sdnn.identify.offline.initstate import estimate_initial_state, state_neurons
 from flowchart2sdnn.network.alignment import run_aligned
 from flowchart2sdnn.network.runtime import CompiledNetwork
 from flowchart2sdnn.simulate.continuous import simulate_continuous

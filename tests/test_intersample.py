@@ -191,7 +191,7 @@ def test_command_line_intersample_is_the_chart_key(tmp_path):
 
 
 def test_the_online_window_sees_the_inputs_the_offline_kernels_see():
-    from flowchart2sdnn.identify.online import OnlineRun
+    from flowchart2sdnn.identify.online.run import OnlineRun
 
     text = _chart(", intersample: linear", substeps=3)
     cn = CompiledNetwork(compile_diagram(diagram_from_text(text, "t.yaml")).network)

@@ -34,7 +34,7 @@ RANKS = {
 
 
 def _unit(module: str) -> str:
-    """flowchart2sdnn.identify.run -> identify; flowchart2sdnn (the package's __init__) -> __init__."""
+    """flowchart2sdnn.identify.offline.run -> identify; flowchart2sdnn (the package's __init__) -> __init__."""
     parts = module.split(".")
     return parts[1] if len(parts) > 1 else "__init__"
 
@@ -103,10 +103,10 @@ def test_the_checker_sees_upward_imports_hidden_in_functions(tmp_path):
     (root / "fit").mkdir(parents=True)
     (root / "__init__.py").write_text("")
     lazy = root / "fit" / "x.py"
-    lazy.write_text("import numpy\nfrom .lm import LMOptions\n\ndef f():\n    from ..identify.run import identify\n")
+    lazy.write_text("import numpy\nfrom .lm import LMOptions\n\ndef f():\n    from ..identify.offline.run import identify\n")
     absolute = root / "fit" / "y.py"
     absolute.write_text("def g():\n    import flowchart2sdnn.network.runtime\n")
-    assert _violations(lazy, root) == ["line 5: flowchart2sdnn.identify.run (rank 5 >= fit's 2)"]
+    assert _violations(lazy, root) == ["line 5: flowchart2sdnn.identify.offline.run (rank 5 >= fit's 2)"]
     assert _violations(absolute, root) == ["line 2: flowchart2sdnn.network.runtime (rank 3 >= fit's 2)"]
 
 
@@ -204,3 +204,37 @@ def test_only_report_draws(path):
 def test_computation_is_everything_below_the_views():
     assert {"fit", "network", "identify", "diagnose", "batch", "simulate", "analysis"} <= COMPUTATION
     assert not {"report", "api", "cli", "__init__"} & COMPUTATION
+
+
+# ------------------------------------------------------------------------------ identify/'s modules stay small
+#: identify/'s modules over LONGEST lines, each with the reason it stays whole
+LONG_MODULES = {
+    "shooting/segmented.py": "one class, Segmented: a stage's residual and sparse Jacobian fill the index plan "
+                             "built once per stage; its methods apart would pass that plan between modules",
+    "online/kernel.py": "numba: the quasi-online per-sample loop and trial mode, inlined into one compiled "
+                        "function (its window numerics are already apart, online/window.py)",
+    "online/window.py": "numba: the window's sums, damped step and iteration, inlined into the kernel's loop",
+    "online/run.py": "the quasi-online run's options, state and result around the one call of the kernel; "
+                     "the record checks and the chunked driver share OnlineRun's arrays",
+}
+LONGEST = 400
+
+
+def test_identify_modules_stay_small():
+    root = PACKAGE / "identify"
+    lengths = {str(f.relative_to(root)): len(f.read_text(encoding="utf-8").splitlines())
+               for f in sorted(root.rglob("*.py"))}
+    long = {name for name, n in lengths.items() if n > LONGEST}
+    over = sorted((n, lengths[n]) for n in long - set(LONG_MODULES))
+    assert not over, f"split by concern (or name the reason in LONG_MODULES): {over}"
+    assert set(LONG_MODULES) <= long, f"no longer long, drop from LONG_MODULES: {sorted(set(LONG_MODULES) - long)}"
+
+
+@pytest.mark.parametrize("path", [f for f in FILES if _unit(_module_name(f)) != "identify"],
+                         ids=lambda p: str(p.relative_to(PACKAGE)))
+def test_identify_is_imported_through_its_face(path):
+    """diagnose, batch, report, the api and the command line take identify's names from flowchart2sdnn.identify
+    (its __init__), never from the modules inside: those may move without their users noticing."""
+    inner = [f"line {line}: {target}" for line, target in _imports(path)
+             if target.startswith("flowchart2sdnn.identify.")]
+    assert not inner, f"{path.relative_to(PACKAGE)} imports identify's modules (import from the face): {inner}"

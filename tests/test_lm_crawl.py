@@ -15,8 +15,8 @@ import pytest
 from flowchart2sdnn.api import dataset_from_frame
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
-from flowchart2sdnn.identify.problem import build_problem
-from flowchart2sdnn.identify.run import lm_options
+from flowchart2sdnn.identify.offline.optimize import lm_options
+from flowchart2sdnn.identify.offline.problem import build_problem
 from flowchart2sdnn.identify.settings import CRAWL_DECREASE, CRAWL_ITERATIONS, CRAWL_NOISE, IdentifySettings
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
@@ -99,8 +99,8 @@ def test_identify_says_when_the_crawl_rule_stopped_it(monkeypatch):
     """The rule made to fire as soon as the fit is at the floor (3 iterations, any gain): the result says so."""
     import importlib
 
-    run = importlib.import_module("flowchart2sdnn.identify.run")  # the module (the package exports a function)
-    identify = run.identify
+    identify = importlib.import_module("flowchart2sdnn.identify.offline.run").identify
+    optimize = importlib.import_module("flowchart2sdnn.identify.offline.optimize")  # where lm_options reads the rule
 
     plant = load_diagram(ROOT / "diagrams" / "two_mass_coulomb_plant.yaml")
     chart = load_diagram(ROOT / "diagrams" / "two_mass_coulomb.yaml")
@@ -108,8 +108,8 @@ def test_identify_says_when_the_crawl_rule_stopped_it(monkeypatch):
     data = dataset_from_frame(frame, time="time", inputs=list(plant.input_names), outputs=list(plant.output_names))
     plain = identify(chart, data, settings=IdentifySettings(seed=1))
     assert plain.converged and not any("creeping" in w for w in plain.warnings)
-    monkeypatch.setattr(run, "CRAWL_ITERATIONS", 3)
-    monkeypatch.setattr(run, "CRAWL_DECREASE", 1e9)
+    monkeypatch.setattr(optimize, "CRAWL_ITERATIONS", 3)
+    monkeypatch.setattr(optimize, "CRAWL_DECREASE", 1e9)
     ruled = identify(chart, data, settings=IdentifySettings(seed=1))
     assert ruled.converged and ruled.status == "small_cost_change"
     assert [w for w in ruled.warnings if w.startswith("converged at the noise floor while still creeping (")]

@@ -11,7 +11,7 @@ from flowchart2sdnn.data.csvdata import Dataset
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.fit.transforms import Bounds
-from flowchart2sdnn.identify.problem import CHATTER_LIMIT, GROWTH_LIMIT, build_problem
+from flowchart2sdnn.identify.offline.problem import CHATTER_LIMIT, GROWTH_LIMIT, build_problem
 
 CHARTS = Path(__file__).resolve().parents[1] / "diagrams" / "paper"
 

@@ -103,8 +103,8 @@ def test_identify_takes_nielsen_steps_only_where_no_learned_curve_is_fitted():
 
     import flowchart2sdnn as sd
     from flowchart2sdnn.diagram.validate import load_diagram
-    from flowchart2sdnn.identify.problem import build_problem
-    from flowchart2sdnn.identify.run import lm_options
+    from flowchart2sdnn.identify.offline.optimize import lm_options
+    from flowchart2sdnn.identify.offline.problem import build_problem
     from flowchart2sdnn.identify.settings import IdentifySettings
 
     root = Path(__file__).resolve().parent.parent

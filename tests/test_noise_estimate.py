@@ -1,4 +1,4 @@
-"""The noise estimate every "x the noise" decision reads (identify.shooting.noise_variance / noise_level) on a
+"""The noise estimate every "x the noise" decision reads (identify.assess.noise.noise_variance / noise_level) on a
 smooth record with 10 samples per resonance period: the second difference holds the record's curvature, the
 estimate must still find the noise. Oracle: scipy's solve_ivp run of a hardening-spring oscillator with a
 smooth input (tests/smooth_oracle.py), white noise of a known sigma added."""
@@ -12,8 +12,8 @@ import pytest
 import smooth_oracle as so
 
 from flowchart2sdnn.data.csvdata import Dataset
-from flowchart2sdnn.identify.problem import build_problem
-from flowchart2sdnn.identify.shooting import noise_level, noise_variance
+from flowchart2sdnn.identify.assess.noise import noise_level, noise_variance
+from flowchart2sdnn.identify.offline.problem import build_problem
 
 
 @functools.cache

@@ -21,8 +21,8 @@ from flowchart2sdnn.compiler import compile_diagram, compile_file
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.fit.transforms import Bounds
-from flowchart2sdnn.identify import online_kernel as ok
-from flowchart2sdnn.identify.online import OnlineOptions, OnlineRun, quasi_online
+from flowchart2sdnn.identify.online import kernel as ok
+from flowchart2sdnn.identify.online.run import OnlineOptions, OnlineRun, quasi_online
 from flowchart2sdnn.network.runtime import CompiledNetwork
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 

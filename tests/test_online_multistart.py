@@ -19,10 +19,10 @@ from flowchart2sdnn.data.csvdata import read_csv, write_csv
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.executors import SerialExecutor, make_executor
 from flowchart2sdnn.fit.multistart import draw_starts
-from flowchart2sdnn.identify.online import OnlineOptions, quasi_online
-from flowchart2sdnn.identify.problem import build_problem, required_columns
-from flowchart2sdnn.identify.run import IdentifySettings, identify
-from flowchart2sdnn.identify.workers import quasi_online_start
+from flowchart2sdnn.identify.offline.problem import build_problem, required_columns
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
+from flowchart2sdnn.identify.offline.workers import quasi_online_start
+from flowchart2sdnn.identify.online.run import OnlineOptions, quasi_online
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 
 DIAGRAMS = Path(__file__).resolve().parents[1] / "diagrams"

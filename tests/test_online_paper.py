@@ -17,7 +17,7 @@ from paper_example import paper_example
 from flowchart2sdnn.diagram.dump import with_values
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.identify.document import fix_from_result
-from flowchart2sdnn.identify.run import IdentifySettings, identify
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
 
 
 @pytest.mark.slow

@@ -20,8 +20,8 @@ from randomnet import random_gdnn
 import flowchart2sdnn as sd
 from flowchart2sdnn.compiler import compile_diagram
 from flowchart2sdnn.diagram.validate import load_diagram
-from flowchart2sdnn.identify import online_kernel as ok
-from flowchart2sdnn.identify.online import OnlineOptions, OnlineRun
+from flowchart2sdnn.identify.online import kernel as ok
+from flowchart2sdnn.identify.online.run import OnlineOptions, OnlineRun
 from flowchart2sdnn.network.runtime import CompiledNetwork
 from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 

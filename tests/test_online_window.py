@@ -1,4 +1,4 @@
-"""Quasi-online LM, window mode (identify/online_kernel.py module docstring): each iteration by hand.
+"""Quasi-online LM, window mode (identify/online/kernel.py module docstring): each iteration by hand.
 
 Oracles: the hand-derived recursion y(t) = w y(t-1) + k u(t) and its sensitivities, the LM formula and the
 trainlm accept test in numpy; the scaled first damping rule of fit/lm.py (LMOptions.tau) by hand; the
@@ -12,8 +12,8 @@ import pytest
 from feedback_neuron import feedback_neuron, hand_run
 from randomnet import random_gdnn
 
-from flowchart2sdnn.identify import online_kernel as ok
-from flowchart2sdnn.identify.online import OnlineOptions, OnlineRun, quasi_online
+from flowchart2sdnn.identify.online import kernel as ok
+from flowchart2sdnn.identify.online.run import OnlineOptions, OnlineRun, quasi_online
 from flowchart2sdnn.network.runtime import CompiledNetwork
 
 

@@ -22,9 +22,9 @@ from flowchart2sdnn.executors import (
     make_executor,
 )
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
-from flowchart2sdnn.identify.problem import build_problem, required_columns
-from flowchart2sdnn.identify.run import IdentifySettings, identify
-from flowchart2sdnn.identify.workers import fit_start, fit_task, problem_of
+from flowchart2sdnn.identify.offline.problem import build_problem, required_columns
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
+from flowchart2sdnn.identify.offline.workers import fit_start, fit_task, problem_of
 
 SETTINGS = IdentifySettings(starts=4, seed=7, max_iter=12)
 

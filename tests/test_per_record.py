@@ -15,7 +15,7 @@ import pytest
 import flowchart2sdnn as sd
 from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
-from flowchart2sdnn.identify.problem import build_problem
+from flowchart2sdnn.identify.offline.problem import build_problem
 from flowchart2sdnn.report.identify_text import format_result
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 from flowchart2sdnn.simulate.excitation import aprbs

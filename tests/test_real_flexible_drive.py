@@ -45,8 +45,8 @@ def owner_fit():
     """The owner's model (physical Coulomb friction) identified on square_2V by the library."""
     from flowchart2sdnn.data.csvdata import read_csv
     from flowchart2sdnn.diagram.validate import load_diagram
-    from flowchart2sdnn.identify.problem import required_columns
-    from flowchart2sdnn.identify.run import IdentifySettings, identify
+    from flowchart2sdnn.identify.offline.problem import required_columns
+    from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
 
     diagram = load_diagram(CHART)
     mapping = {"u": "u_V", "v1": "v1_cart1_mm_s", "v2": "v2_cart2_mm_s"}
@@ -102,7 +102,7 @@ def test_owner_model_validates_on_square_1p5V(owner_fit):
 
 def test_library_metric_is_the_fit_formula(owner_fit):
     from flowchart2sdnn.data.csvdata import read_csv
-    from flowchart2sdnn.identify.problem import metrics
+    from flowchart2sdnn.identify.offline.problem import metrics
     from flowchart2sdnn.network.alignment import run_aligned
 
     mapping = {"u": "u_V", "v1": "v1_cart1_mm_s", "v2": "v2_cart2_mm_s"}

@@ -1,7 +1,7 @@
 """Pages that never contradict themselves: every figure of a record shows the fit % of its table row, and every
 warning the command line printed is on the page (identify and diagnose), with the command line that ran.
 
-The oracles are independent of the page: the fit table's numbers are identify's own scoring (identify.run),
+The oracles are independent of the page: the fit table's numbers are identify's own scoring (identify.offline.run),
 the figure's come from a separate simulation (identify.compare.compare_fit), read back from the DOM a headless
 Chromium built; the warnings are the lines the command printed on the terminal.
 """

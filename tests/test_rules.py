@@ -24,11 +24,11 @@ SCANNED = ("fit", "identify", "diagnose")
 #: change memory and speed, never a result.
 _SLOTS = ("F_MU F_EE F_CC F_CH F_NL I_COUNT I_HEAD I_STEPS I_BLOCK_POS I_ACCEPTED I_REJECTED I_DIVERGED "
           "I_CHOL_FALLBACK I_SKIPPED I_RESYNC I_N_DIV_T I_NEXT I_SINCE_RESYNC N_FS N_ITS").split()
-ALLOWED = {*(("identify/online_window.py", name) for name in _SLOTS),
+ALLOWED = {*(("identify/online/window.py", name) for name in _SLOTS),
     ("identify/serialize.py", "RESULT_VERSION"), ("diagnose/serialize.py", "REPORT_VERSION"),
     ("diagnose/usereffects.py", "EFFECTS_FORMAT"),
-    ("identify/online_kernel.py", "STATUS_OK"), ("identify/online_kernel.py", "STATUS_DIVERGED_BEFORE_START"),
-    ("identify/online.py", "_SLICE"), ("identify/workers.py", "_CACHE_SIZE"),
+    ("identify/online/kernel.py", "STATUS_OK"), ("identify/online/kernel.py", "STATUS_DIVERGED_BEFORE_START"),
+    ("identify/online/run.py", "_SLICE"), ("identify/offline/workers.py", "_CACHE_SIZE"),
 }
 #: Settings fields whose numeric default is a count or a switch, not a threshold.
 ALLOWED_FIELDS = {"seed", "starts", "every", "online_start", "threads", "init_window"}
@@ -61,7 +61,7 @@ def test_every_rule_says_why_and_where():
 
 
 def _resolve(where: str):
-    """The object a `where` names ("identify.floor.FLOOR_WARN", "fit.lm.LMOptions.max_iter"): a module
+    """The object a `where` names ("identify.assess.floor.FLOOR_WARN", "fit.lm.LMOptions.max_iter"): a module
     attribute, or a dataclass field's default (returned as a dataclasses.Field)."""
     parts = where.split(" ")[0].split(".")
     for cut in range(len(parts), 0, -1):
@@ -87,13 +87,13 @@ def test_each_place_holds_its_rules_value():
                 got = got.default
             elif callable(got) or isinstance(got, type(importlib)) or " " in where:
                 continue  # a function, a module or a described use: its existence is what is checked
-            if where == "identify.initstate._OPTIONS":
+            if where == "identify.offline.initstate._OPTIONS":
                 continue  # an LMOptions whose fields test_initstate_options checks
             assert type(got) is type(r.value) and got == r.value, (r.name, where, got)
 
 
 def test_initstate_options():
-    from flowchart2sdnn.identify import initstate
+    from flowchart2sdnn.identify.offline import initstate
 
     o = initstate._OPTIONS
     assert (o.max_iter, o.tau, o.min_rel_cost_change) == (value("initstate_max_iter"), value("initstate_tau"),

@@ -65,7 +65,7 @@ def test_sat_continuous_oracle_clips():
 def test_sat_in_the_quasi_online_kernel_matches_the_runtime():
     """The online kernel runs its own copy of the network: on noise-free data made by the runtime at the true
     values, it must see zero error (a wrong clip would leave a residual and move the parameters)."""
-    from flowchart2sdnn.identify.online import OnlineOptions, quasi_online
+    from flowchart2sdnn.identify.online.run import OnlineOptions, quasi_online
 
     d = diagram_from_text(CHART)
     cn = CompiledNetwork(compile_diagram(d).network)

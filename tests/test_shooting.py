@@ -1,4 +1,4 @@
-"""--shooting L: multiple shooting, then single shooting over the whole record (identify.shooting).
+"""--shooting L: multiple shooting, then single shooting over the whole record (identify.shooting.multiple).
 
 Oracles: central finite differences of the multiple-shooting residual (the Jacobian, including the columns of
 the free segment starts that the RTRL kernel differentiates through the history), scipy's least_squares on
@@ -23,11 +23,12 @@ from flowchart2sdnn.diagram.validate import load_diagram
 from flowchart2sdnn.errors import SdnnError
 from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.fit.steps import gram
-from flowchart2sdnn.identify import shooting
-from flowchart2sdnn.identify.initstate import state_neurons
-from flowchart2sdnn.identify.problem import build_problem
-from flowchart2sdnn.identify.run import IdentifySettings, identify
-from flowchart2sdnn.identify.shooting import Segmented, stage_lengths
+from flowchart2sdnn.identify.offline.initstate import state_neurons
+from flowchart2sdnn.identify.offline.problem import build_problem
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
+from flowchart2sdnn.identify.shooting import segmented
+from flowchart2sdnn.identify.shooting.multiple import stage_lengths
+from flowchart2sdnn.identify.shooting.segmented import Segmented
 from flowchart2sdnn.network.runtime import CompiledNetwork
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 from flowchart2sdnn.simulate.excitation import aprbs
@@ -87,7 +88,7 @@ def test_history_sensitivities_match_finite_differences():
 @pytest.mark.parametrize("dense_fraction", [0.25, 2.0])  # the trainer gets J dense / sparse (CSR)
 def test_the_combined_jacobian_matches_central_differences(chart, plant, outputs, free, tol, dense_fraction,
                                                              monkeypatch):
-    monkeypatch.setattr(shooting, "DENSE_FRACTION", dense_fraction)
+    monkeypatch.setattr(segmented, "DENSE_FRACTION", dense_fraction)
     problem = build_problem(load_diagram(chart), _data(plant, 120, 1, outputs))
     seg = Segmented(problem, 25, 3.0)
     assert seg.free_names == free and len(seg.pieces) == 5 and seg.n_x == seg.n_theta + 4 * len(free)
@@ -140,7 +141,7 @@ def test_pieces_in_one_kernel_call_equal_one_call_per_piece():
 @pytest.mark.parametrize("threads", [1, 2])
 @pytest.mark.parametrize("dense_fraction", [0.25, 2.0])  # the trainer gets J dense / sparse (CSR)
 def test_two_records_jacobian_matches_central_differences(threads, dense_fraction, monkeypatch):
-    monkeypatch.setattr(shooting, "DENSE_FRACTION", dense_fraction)
+    monkeypatch.setattr(segmented, "DENSE_FRACTION", dense_fraction)
     chart = load_diagram(COULOMB)
     problem = build_problem(chart, _data(COULOMB_PLANT, 130, 5, ["w1", "w2"]),
                             more=[_data(COULOMB_PLANT, 70, 6, ["w1", "w2"])])

@@ -1,4 +1,4 @@
-"""--shooting auto and the chaotic long-record rule (identify.shootauto, identify.shooting's MERGE_RISE).
+"""--shooting auto and the chaotic long-record rule (identify.shooting.auto, identify.shooting.multiple's MERGE_RISE).
 
 Oracles: hand computations of how a moved start grows in a linear chart (x' = a x: e^{a t}, so the
 thousandfold horizon is ln(1000) / a and one Lyapunov time 1 / a), and a driven pendulum from the continuous
@@ -15,10 +15,10 @@ import pytest
 
 import flowchart2sdnn as sd
 from flowchart2sdnn.diagram.validate import load_diagram
-from flowchart2sdnn.identify.problem import build_problem
-from flowchart2sdnn.identify.run import IdentifySettings, identify
-from flowchart2sdnn.identify.shootauto import GROWTH_BOUND, choose_shooting
-from flowchart2sdnn.identify.shooting import noise_level
+from flowchart2sdnn.identify.assess.noise import noise_level
+from flowchart2sdnn.identify.offline.problem import build_problem
+from flowchart2sdnn.identify.offline.run import IdentifySettings, identify
+from flowchart2sdnn.identify.shooting.auto import GROWTH_BOUND, choose_shooting
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 
 ROOT = Path(__file__).resolve().parent

@@ -1,4 +1,4 @@
-"""Reseating an outlying segment's free start (identify.shooting.reseat).
+"""Reseating an outlying segment's free start (identify.shooting.multiple.reseat).
 
 Oracle: the driven pendulum from the continuous oracle (RK4), chaotic under a drive of 1.15 at 2/3 rad/s. With
 the true parameters and every segment started from the oracle's own state at its boundary, each segment follows
@@ -16,8 +16,9 @@ import pytest
 
 import flowchart2sdnn as sd
 from flowchart2sdnn.diagram.validate import load_diagram
-from flowchart2sdnn.identify.problem import build_problem
-from flowchart2sdnn.identify.shooting import Segmented, reseat
+from flowchart2sdnn.identify.offline.problem import build_problem
+from flowchart2sdnn.identify.shooting.multiple import reseat
+from flowchart2sdnn.identify.shooting.segmented import Segmented
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 
 PENDULUM = Path(__file__).resolve().parent / "data" / "shooting" / "pendulum_plant.yaml"

@@ -1,4 +1,4 @@
-"""--shooting-starts free: multiple shooting fits the measured states' segment starts too (identify.shooting).
+"""--shooting-starts free: multiple shooting fits the measured states' segment starts too (identify.shooting.multiple).
 
 Oracles: central finite differences of the multiple-shooting residual (the measured starts' columns are
 differentiated through the history like the unmeasured ones'), and the default `data` starts: where the free
@@ -14,8 +14,8 @@ from click.testing import CliRunner
 
 from flowchart2sdnn.cli import main
 from flowchart2sdnn.diagram.validate import load_diagram
-from flowchart2sdnn.identify.problem import build_problem
-from flowchart2sdnn.identify.shooting import Segmented
+from flowchart2sdnn.identify.offline.problem import build_problem
+from flowchart2sdnn.identify.shooting.segmented import Segmented
 from tests.test_shooting import COULOMB, COULOMB_PLANT, _data, _fd
 
 

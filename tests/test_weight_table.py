@@ -14,8 +14,8 @@ import pytest
 from randomnet import random_gdnn
 
 from flowchart2sdnn.compiler import compile_file
-from flowchart2sdnn.identify import online_kernel as ok
-from flowchart2sdnn.identify.online import OnlineOptions, OnlineRun
+from flowchart2sdnn.identify.online import kernel as ok
+from flowchart2sdnn.identify.online.run import OnlineOptions, OnlineRun
 from flowchart2sdnn.network.runtime import CompiledNetwork
 
 ROOT = Path(__file__).resolve().parent.parent

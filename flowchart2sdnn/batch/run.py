@@ -3,7 +3,7 @@
 Each data file becomes one row of the results table (see :mod:`.results`). The parent process hashes and reads
 each file (a file it cannot read becomes an error row at once) and sends a :class:`FileUnit` (the chart, the
 data arrays and the settings: nothing that needs a shared file system) to the executor; :func:`identify_file`
-runs :func:`~flowchart2sdnn.identify.run.identify` in the worker and turns its result into a row. Any failure
+runs :func:`~flowchart2sdnn.identify.offline.run.identify` in the worker and turns its result into a row. Any failure
 of one file (bad data, a fit that raises, a worker that died) is a row with status "error" and the message.
 
 Resuming: a file is skipped when the table already has a row for that path with the same sha256 and the same
@@ -28,8 +28,7 @@ from ..data.csvdata import Dataset, read_csv
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..executors import Executor, SerialExecutor
-from ..identify.result import Identification
-from ..identify.run import IdentifySettings
+from ..identify import Identification, IdentifySettings
 from .results import Columns, ResultsWriter, columns_for, read_results
 
 __all__ = ["BatchSettings", "BatchSummary", "FileUnit", "run_batch", "identify_file", "config_key"]
@@ -177,7 +176,7 @@ def identify_file(unit: FileUnit) -> dict:
     dict
         Column -> value; ``status`` is the optimizer's status, "interrupted", or "error" with ``error`` set.
     """
-    from ..identify.run import identify
+    from ..identify import identify
 
     t0 = time.perf_counter()
     try:
@@ -265,7 +264,7 @@ def run_batch(diagram: Diagram, files: Sequence[str], output: str, settings: Bat
 
 def _run(diagram: Diagram, files: Sequence[str], output: str, settings: BatchSettings, executor: Executor,
          progress) -> BatchSummary:
-    from ..identify.problem import required_columns
+    from ..identify import required_columns
 
     t0 = time.perf_counter()
     columns = columns_for(diagram.parameter_names, diagram.output_names, diagnose=settings.diagnose)

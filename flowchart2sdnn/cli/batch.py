@@ -92,8 +92,7 @@ def batch(chart, data, output, fix_from, workers, scheduler, starts, seed, max_i
     from ..batch.run import BatchSettings, run_batch
     from ..diagram.validate import load_diagram
     from ..executors import make_executor
-    from ..identify.document import fix_from_result
-    from ..identify.run import IdentifySettings
+    from ..identify import IdentifySettings, fix_from_result
 
     chart, data = chart_first("sdnn batch CHART DATA...", chart, data)
     if workers and scheduler and scheduler != "local":

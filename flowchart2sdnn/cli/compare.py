@@ -50,9 +50,7 @@ def compare(model, data, horizon, output, chart, alignment, mapping, units, fmt,
     from ..atomic import check_output_path
     from ..compiler import compile_diagram
     from ..data.csvdata import read_csv
-    from ..identify.compare import compare_records
-    from ..identify.document import read_model
-    from ..identify.problem import required_columns
+    from ..identify import compare_records, read_model, required_columns
     from ..network.runtime import CompiledNetwork
     from ..tables import table
 

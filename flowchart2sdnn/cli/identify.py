@@ -1,4 +1,4 @@
-"""`sdnn identify`: the click layer over identify.run (formatting lives in report.identify_text).
+"""`sdnn identify`: the click layer over identify.offline.run (formatting lives in report.identify_text).
 
 Layer: cli (the rule is in the package docstring).
 """
@@ -117,10 +117,8 @@ def identify(paths, diagram, output, fix_from, validation, init_window, shooting
     from ..diagram.dump import dump_diagram
     from ..diagram.validate import load_diagram
     from ..errors import SdnnError
-    from ..identify.document import dumps, fix_from_result
-    from ..identify.run import IdentifySettings
-    from ..identify.run import identify as run_identify
-    from ..identify.settings import IDENTIFY_GEODESIC
+    from ..identify import IDENTIFY_GEODESIC, IdentifySettings, dumps, fix_from_result
+    from ..identify import identify as run_identify
     from ..report.identify_text import format_result
 
     chart, data = chart_and_data("identify", paths, diagram)

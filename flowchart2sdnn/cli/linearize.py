@@ -51,7 +51,7 @@ def linearize(model, data, at, kink, control_path, bode, chart, mapping, units, 
     from ..analysis.linearize import linearize as run_linearize
     from ..analysis.linearize import parse_operating_point
     from ..atomic import check_output_path
-    from ..identify.document import read_model
+    from ..identify import read_model
     from ..tables import table
 
     model, data = chart_first("sdnn linearize MODEL DATA...", model, data, MODEL_SUFFIXES)
@@ -80,7 +80,7 @@ def linearize(model, data, at, kink, control_path, bode, chart, mapping, units, 
     if bode:
         from ..analysis.response import empirical_response
         from ..data.csvdata import read_csv
-        from ..identify.problem import required_columns
+        from ..identify import required_columns
         from ..report.bode import write_bode
 
         estimates = []

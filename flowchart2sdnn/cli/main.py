@@ -156,7 +156,7 @@ def simulate(chart, data, output, params, continuous, signals, alignment, subste
         check_output_path(output, [chart, data] + ([params] if params else []), force=force)
     diagram = with_substeps(load_diagram(chart), substeps)
     if params:
-        from ..identify.document import apply_result_file
+        from ..identify import apply_result_file
 
         diagram = apply_result_file(diagram, params)
     maps, scales = column_reading(diagram, mapping, units)

@@ -184,7 +184,7 @@ def read_records(paths, diagram, maps, scales, delimiter: str, decimal: str, res
     gaps split, with --resample another rate resampled), each cut to --rows first when `window`."""
     from ..data.csvdata import read_csv
     from ..data.timebase import conform
-    from ..identify.problem import required_columns
+    from ..identify import required_columns
 
     cols = required_columns(diagram)
     out = []

@@ -18,7 +18,7 @@ from pathlib import Path
 from ..atomic import read_json
 from ..diagram.model import Diagram
 from ..errors import SdnnError
-from ..identify.document import from_document as identification_from
+from ..identify import from_document as identification_from
 from ..notices import Notice
 from .fitting import DiagnoseSettings
 from .result import (

@@ -17,13 +17,23 @@ from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..fit.effective import effective_samples
-from ..identify.floor import measure_floor, pooled_floor
-from ..identify.initstate import estimate_initial_state
-from ..identify.problem import Problem, build_problem, data_init, metrics
-from ..identify.run import Identification, IdentifySettings, identify
-from ..identify.settings import REFIT_TAU
-from ..identify.shootauto import SUSPECT_PEAK, choose_shooting
-from ..identify.shooting import NOISE_MARGIN, noise_cost
+from ..identify import (
+    NOISE_MARGIN,
+    REFIT_TAU,
+    SUSPECT_PEAK,
+    Identification,
+    IdentifySettings,
+    Problem,
+    build_problem,
+    choose_shooting,
+    data_init,
+    estimate_initial_state,
+    identify,
+    measure_floor,
+    metrics,
+    noise_cost,
+    pooled_floor,
+)
 from .effects import Scales
 from .residual import signal_correlation, whiteness
 
@@ -79,16 +89,16 @@ class DiagnoseSettings:
     control_refit: bool = True
     # trace only from a converged first fit (False: --allow-unconverged, trace anyway)
     require_converged: bool = True
-    # > 0: each validation record's initial state is fitted on its first init_window samples (identify.initstate)
+    # > 0: each validation record's initial state is fitted on its first init_window samples (identify.offline.initstate)
     # and the record is scored from there (the public benchmarks' protocol)
     init_window: int = 0
-    # multiple shooting (identify.shooting) for the full fits (the chart as given, a finished control or
+    # multiple shooting (identify.shooting.multiple) for the full fits (the chart as given, a finished control or
     # candidate: max_iter iterations); the brief refits start next to a fit and stay single shooting
     shooting: str | int = "off"
     # when no refit of the `top` places comes within SECOND_LOOK x the noise (the chart still misses most of what
     # the records hold), the next `top` significant places are refitted too before the round decides (False: off)
     second_look: bool = True
-    # the final fit's discretization-bias analysis (identify.floorbias, identify's default; the fits while tracing
+    # the final fit's discretization-bias analysis (identify.assess.floorbias, identify's default; the fits while tracing
     # skip it): REPORT.json's `final` then widens ci95 by the shift the network's step error causes. Without it
     # the three-mass backlash bench's final b1, b2 read +12 %, -21 % with noise-only intervals excluding the truth
     # (seed 2; the shift alone +7.6 %, -16 %: docs/diagnose.md)
@@ -133,7 +143,7 @@ class Fitted:
     validation: dict
     start: str = "chart"
     accepted: tuple = ()
-    # the discretization floor on the validation records (identify.floor, pooled over outputs as validation_rms):
+    # the discretization floor on the validation records (identify.assess.floor, pooled over outputs as validation_rms):
     # measured for the fits a candidate is compared against (see with_floor), None elsewhere or where skipped
     validation_floor: float | None = None
 
@@ -322,10 +332,10 @@ def fit_growing(diagram: Diagram, train: list[Dataset], records, settings: Diagn
 
 def unpredictable(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings) -> bool:
     """Whether the single-shooting fit `fitted` may have stopped where a growing horizon (:func:`fit_growing`)
-    goes further: its chart amplifies a moved start more than stable charts do (identify.shootauto's probe over
+    goes further: its chart amplifies a moved start more than stable charts do (identify.shooting.auto's probe over
     the training records, peak above SUSPECT_PEAK) and its training residual is off the noise floor (RMS above
     NOISE_MARGIN x the noise read off the records' second differences): identify's rule for its second look
-    (identify.shootauto.second_look), applied to a brief refit.
+    (identify.shooting.auto.second_look), applied to a brief refit.
 
     Why: a neutral effect (zero amplitude) starts on the chart's own trajectory, yet the effect it adds may make
     the drive chaotic (motor cogging, two-mass bench, 30 s records at 0.01 rad/s: the brief refits of cogging
@@ -363,7 +373,7 @@ def still_moving(fitted: Fitted) -> list[str]:
 
 def far_above_noise(fitted: Fitted, train: list[Dataset], settings: DiagnoseSettings, ratio: float) -> bool:
     """Whether the training residual RMS of `fitted` exceeds `ratio` x the noise read off the records' second
-    differences (:func:`~flowchart2sdnn.identify.shooting.noise_level`); False where that cannot be told."""
+    differences (:func:`~flowchart2sdnn.identify.assess.noise.noise_level`); False where that cannot be told."""
     problem = _training_problem(fitted, train, settings)
     return problem is not None and _above_noise(fitted, problem, ratio)
 

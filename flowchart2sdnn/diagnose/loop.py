@@ -40,7 +40,7 @@ from .. import rules
 from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..errors import SdnnError
-from ..identify.run import with_floor_bias
+from ..identify import with_floor_bias
 from ..strictjson import finite_or_none
 from .document import REPORT_FORMAT, REPORT_VERSION, fit_summary, read_accepted, read_candidate, read_round
 from .effects import BUILTIN_EFFECTS, Effect, Scales

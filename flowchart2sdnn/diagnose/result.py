@@ -18,7 +18,7 @@ from functools import cached_property
 from typing import Any
 
 from ..diagram.model import Diagram
-from ..identify.result import Identification
+from ..identify import Identification
 from ..notices import Notice, aligned, messages
 from ..views import view
 from .fitting import DiagnoseSettings

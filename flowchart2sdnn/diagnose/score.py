@@ -52,7 +52,7 @@ from ..data.csvdata import Dataset
 from ..diagram.curves import weight_names
 from ..diagram.model import Diagram
 from ..errors import SdnnError
-from ..identify.problem import Problem, build_problem
+from ..identify import Problem, build_problem
 from ..strictjson import finite_or_none
 from .effects import Effect
 from .graph import Place

@@ -15,7 +15,7 @@ from collections.abc import Mapping
 from dataclasses import asdict, fields
 from typing import TYPE_CHECKING
 
-from ..identify.document import to_document as identification_document
+from ..identify import to_document as identification_document
 from ..strictjson import strict_json
 
 if TYPE_CHECKING:  # names for annotations only: importing result here would close the cycle again

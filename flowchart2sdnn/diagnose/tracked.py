@@ -35,8 +35,7 @@ import numpy as np
 from .. import rules
 from ..data.csvdata import Dataset
 from ..errors import SdnnError
-from ..identify.problem import Problem, build_problem
-from ..identify.shooting import NOISE_MARGIN, noise_level
+from ..identify import NOISE_MARGIN, Problem, build_problem, noise_level
 from .fitting import DiagnoseSettings, Fitted, unpredictable
 
 __all__ = ["WINDOW", "FOLLOW_FRACTION", "ROWS_PER_QUANTITY", "tracked_rows", "record_rows", "score_rows", "prefix_records",

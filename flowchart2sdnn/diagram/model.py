@@ -77,7 +77,7 @@ class Parameter:
     fixed: bool = False
     description: str | None = None
     location: Location | None = None
-    # with several training records, one value per record (identify.problem); last so positional use stays
+    # with several training records, one value per record (identify.offline.problem); last so positional use stays
     per_record: bool = False
 
 

@@ -1,7 +1,7 @@
 """The Levenberg-Marquardt damping schedule (MATLAB ``trainlm``), one definition for every trainer.
 
 Plain scalar functions on floats, written in the subset of Python that numba compiles: the offline trainer
-(:mod:`.lm`) calls them as they are, the quasi-online kernel (:mod:`flowchart2sdnn.identify.online_kernel`)
+(:mod:`.lm`) calls them as they are, the quasi-online kernel (:mod:`flowchart2sdnn.identify.online.kernel`)
 compiles the same functions with ``numba.njit``. So fit/ stays free of numba and both trainers move mu alike.
 
 * accepted trial: ``mu = max(mu * mu_dec, mu_min)`` (``mu_min`` keeps mu from underflowing, so that a later

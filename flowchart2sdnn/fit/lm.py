@@ -13,7 +13,7 @@ and the step is recomputed (the schedule of :mod:`.damping`, shared with the qua
 values, or raises FloatingPointError/OverflowError) or that ``guard`` refuses is rejected the same way,
 so the result never holds NaN.
 
-``J`` may be a ``scipy.sparse`` matrix: the multiple-shooting Jacobian (identify.shooting) has a dense block
+``J`` may be a ``scipy.sparse`` matrix: the multiple-shooting Jacobian (identify.shooting.multiple) has a dense block
 for the parameters and, per segment, a block for that segment's free start only; formed densely, its
 products cost 13x a single-shooting iteration at 250 segments (benchmarks/bench_shooting_iteration.py).
 The trainer only forms JᵀJ, Jᵀe and column norms, which sparse products give at the cost of the nonzeros.

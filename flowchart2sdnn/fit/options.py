@@ -199,7 +199,7 @@ class LMResult:
     rejected_cost, rejected_diverged, rejected_guard : int   trial steps rejected, by reason
     last_guard_reason : str or None                          the guard's last refusal
     stages : tuple of dict      earlier stages of a staged fit whose last stage this is (multiple shooting,
-                                identify.shooting), each a summary; () for a plain fit
+                                identify.shooting.multiple), each a summary; () for a plain fit
     """
 
     x: np.ndarray

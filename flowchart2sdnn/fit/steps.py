@@ -44,7 +44,7 @@ class WideFirstCSR(sparse.csr_matrix):
     """A CSR Jacobian whose caller also hands over its first ``wide.shape[1]`` columns as the dense array ``wide``
     and the others as the CSR matrix ``rest`` (the values of J[:, :k].toarray() and J[:, k:]; None: not given):
     JᵀJ then needs no column slicing of J nor a count of every column's nonzeros (5 of gram's 7 ms at 250
-    segments, bench_shooting_iteration). A multiple-shooting Jacobian (identify.shooting) writes them from its
+    segments, bench_shooting_iteration). A multiple-shooting Jacobian (identify.shooting.multiple) writes them from its
     kernels' results; anything scipy derives from it is a plain CSR matrix (or one without them)."""
 
     wide: np.ndarray | None = None

@@ -14,7 +14,7 @@ a horizon as long as the record is the free run. With delays of more than one sa
 samples of a restart's history repeat its last one (the network's history before a run is one vector).
 
 Fit % is 100 (1 - ||y - yhat|| / ||y - mean(y)||) and RMS the root mean square of y - yhat over the scored
-rows: the numbers of ``identify``'s fit table (:func:`flowchart2sdnn.identify.problem.metrics`), which they
+rows: the numbers of ``identify``'s fit table (:func:`flowchart2sdnn.identify.offline.problem.metrics`), which they
 equal for the free run. :func:`compare_fit` compares a fit's own records as its table scored them (each
 training record with its own per-record values, a validation record from its fitted initial state), so a
 figure drawn from it shows the table's numbers.
@@ -34,8 +34,8 @@ from ..network.alignment import fitted_rows, history_outputs, network_inputs, ru
 from ..network.kernels import simulate_kernel
 from ..network.runtime import CompiledNetwork
 from ..strictjson import finite_or_none
-from .initstate import estimate_initial_state
-from .problem import columns_of, data_init, network_input_names
+from .offline.initstate import estimate_initial_state
+from .offline.problem import columns_of, data_init, network_input_names
 
 __all__ = ["RecordComparison", "Comparison", "predict", "compare_records", "compare_fit", "record_theta",
            "signal_units"]

@@ -35,7 +35,7 @@ class Estimate:
     ``stderr`` and ``ci95`` are None when the parameter is fixed or no uncertainty could be computed; they are
     widened for coloured residuals (see :attr:`Uncertainty.interval_inflation`). ``ci95`` is also widened by
     the discretization's bias |beta| on both sides where identify estimated it (RESULT.json
-    `discretization.bias`, identify.floorbias); ``ci95_noise`` is the interval from the noise alone (the
+    `discretization.bias`, identify.assess.floorbias); ``ci95_noise`` is the interval from the noise alone (the
     Jacobian's covariance; equal to ``ci95`` where no bias was estimated), ``stderr`` always the noise's.
     """
 
@@ -182,7 +182,7 @@ class ChartSource:
 
 @dataclass(frozen=True, eq=False)
 class Identification:
-    """What :func:`~flowchart2sdnn.identify.run.identify` found.
+    """What :func:`~flowchart2sdnn.identify.offline.run.identify` found.
 
     Attributes
     ----------
@@ -299,8 +299,8 @@ class Identification:
         alignment : str, optional
             "zoh" or "direct"; default the one of the fit.
         """
-        from .arrays import network_input_names
         from .compare import predict, require_columns
+        from .offline.arrays import network_input_names
 
         compiled, x = self._network()
         require_columns(data, network_input_names(compiled.net))

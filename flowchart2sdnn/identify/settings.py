@@ -69,7 +69,7 @@ MIN_REL_COST_CHANGE = rules.value("min_rel_cost_change")
 #: (one unit of -2 log-likelihood = N dE/E), so 0.01 means "1 % of what the data could ever show".
 CONVERGED_DECREASE = rules.value("converged_decrease")
 #: ... and, once the residual RMS is within CRAWL_NOISE of the noise read off the records' second differences
-#: (identify.shooting.noise_level), when its last CRAWL_ITERATIONS iterations together lowered E by less than
+#: (identify.assess.noise.noise_level), when its last CRAWL_ITERATIONS iterations together lowered E by less than
 #: CRAWL_DECREASE times E/N: one unit of -2 log-likelihood in 100 iterations. A fit at the noise floor that
 #: still creeps is moving along a direction the data barely determine; the three-mass learned chart's draw 9
 #: (benchmarks/bench_rough_init.py, 10 s, seed 1) crept 0.3-0.7 E/N per 100 iterations from iteration 300 to
@@ -91,7 +91,7 @@ NEGLIGIBLE_GAIN = rules.value("negligible_gain")
 NEGLIGIBLE_PACE = rules.value("negligible_pace")
 PACE_ITERATIONS = rules.value("pace_iterations")
 #: With `substeps: auto` (N read from the modes at the chart's init, compiler.substeps) a fit whose network's own
-#: step error against the continuous chart exceeds the floor warning's share of the residual (identify.floor.
+#: step error against the continuous chart exceeds the floor warning's share of the residual (identify.assess.floor.
 #: FLOOR_WARN) is refitted from its values at 4x N (up to the cap): the learned friction the data gave the chart is
 #: stiffer than its flat init, and the warning would otherwise name the sub-steps auto should have taken.
 #: So is a fit whose network, linearized at rest, has an alternating mode (a negative eigenvalue, 1 - s h/J
@@ -105,7 +105,7 @@ HELD_CHATTER = rules.value("held_chatter")
 #: three-mass learned chart's 30 s draw 3 ended "converged" at 18 000x the minimum's cost before identify's own
 #: second look moved it (docs/rough_init.md).
 FAR_ABOVE_NOISE = rules.value("far_above_noise")
-#: identify's (and batch's) multiple shooting by default: "auto" (identify.shootauto) is off wherever a free run of
+#: identify's (and batch's) multiple shooting by default: "auto" (identify.shooting.auto) is off wherever a free run of
 #: the chart at its `init` forgets a moved start. The whole test suite with auto as the default, first run: 580
 #: fits, a length chosen in 64 (62 fuzz charts of 39 samples whose start diverges within a sample, the start
 #: that grows like (1 + T g/J)^k in tests/test_identify_hardening.py, now pinned to off, and one 1199-sample
@@ -122,13 +122,13 @@ SHOOTING = "auto"
 #: bench's default run 0.0110/0.0110 on the 3 s validation with it), "data" otherwise (an L given by hand keeps
 #: what it was measured with)
 SHOOTING_STARTS = "auto"
-#: identify estimates the discretization's bias on each parameter and widens ci95 by it (identify.floorbias): with
+#: identify estimates the discretization's bias on each parameter and widens ci95 by it (identify.assess.floorbias): with
 #: 0.01 rad/s noise (Coulomb benches, auto N, seeds 1-10) the noise-only intervals covered the truth 8 in 10 times
 #: for 13 of 21 parameters (three-mass c1 3 of 10), the widened ones for 21 of 21, at x1.24-1.33 the fit's time
 #: (benchmarks/bench_floor_acceptance.py).
 FLOOR_BIAS = True
 #: Learned curves in a feedback loop start as a stick-slip step at 0.3 of the slope the network's step allows,
-#: a log grid for the other neurons, three brief fits and the step re-sloped (identify.curvestart): on the
+#: a log grid for the other neurons, three brief fits and the step re-sloped (identify.offline.curvestart): on the
 #: two-mass learned-curve bench (10 s, 20 rough draws x/3) single starts from the chart's random +-0.5 weights
 #: reached the lowest minimum 0 of 20 times, from this start 20 of 20 (docs/rough_init.md). "random": the chart's
 #: seeded weights.
@@ -142,7 +142,7 @@ def _need(ok: bool, text: str) -> None:
 
 @dataclass(frozen=True)
 class IdentifySettings:
-    """How :func:`~flowchart2sdnn.identify.run.identify` fits.
+    """How :func:`~flowchart2sdnn.identify.offline.run.identify` fits.
 
     Attributes
     ----------
@@ -168,21 +168,21 @@ class IdentifySettings:
     converged_decrease : float  converged when 10 iterations together gain less than this many times E/N
                              (see :data:`CONVERGED_DECREASE`); 0 runs to ``max_iter``
     init_window : int        > 0: the validation record's initial state is fitted on its first init_window
-                             samples (parameters fixed), the free run scored from that row on (identify.initstate)
+                             samples (parameters fixed), the free run scored from that row on (identify.offline.initstate)
     shooting : "off", "auto" or int  an int L >= 2: multiple shooting first, segments of L samples merged (x4)
-                             until single shooting over whole records, whose fit is the result (identify.shooting;
+                             until single shooting over whole records, whose fit is the result (identify.shooting.multiple;
                              a merge that raises the cost per sample more than MERGE_RISE is refused and the
                              stage before is the result); "off": single shooting only; "auto": L or off chosen
                              from how fast a moved start grows along the records, with a second look after off
-                             when single shooting ends off the noise floor (identify.shootauto)
+                             when single shooting ends off the noise floor (identify.shooting.auto)
     shooting_starts : str    "auto", "data" or "free": the measured states' start at each segment (:data:`SHOOTING_STARTS`)
     threads : int            threads for multiple shooting's segments within one fit in this process (the kernels
                              release the GIL); fits in worker processes (an executor) use one
     floor_bias : bool        estimate the discretization's bias beta on each parameter by refitting the network to
-                             the continuous oracle's run of the identified chart (identify.floorbias) and widen
+                             the continuous oracle's run of the identified chart (identify.assess.floorbias) and widen
                              ci95 by |beta| (see :data:`FLOOR_BIAS`); offline fits only (quasi-online skips it)
     curve_start : str        "stick": learned curves without stored weights in a feedback loop start from a
-                             stick-slip step and a brief fit (identify.curvestart, :data:`CURVE_START`); "random": the
+                             stick-slip step and a brief fit (identify.offline.curvestart, :data:`CURVE_START`); "random": the
                              chart's seeded +-init_range weights. Offline fits only.
     """
 

@@ -215,7 +215,7 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
     recursion (the quasi-online kernel's trial mode restarts it at zero at each block start); otherwise `s_blk`
     and `dn2` are not touched. `slot_of` (ring,) int64, `dn` and `dn2` (n_pad,) float64 are scratch.
     With `hist_sens` the slots of `s_buf` before t = 0 hold the history's own sensitivities (free initial states:
-    identify.shooting) and are read like any other; otherwise they are skipped as zero (`s_blk` always is).
+    identify.shooting.multiple) and are read like any other; otherwise they are skipped as zero (`s_blk` always is).
     `in_theta` (n_inputs,) int64 and `in_dval` (steps, n_inputs) float64, optional: input i depends on theta
     ``in_theta[i]`` (-1: on none) with derivative ``in_dval[t, i]`` at step t (a fitted dead time,
     network.inputsignal).
@@ -273,7 +273,7 @@ def rtrl_step(t, inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, dp
             emit(s_blk[ix(slot), ix(k)], g, dn2)
 
 
-# nogil: multiple shooting runs its segments' kernels on threads (identify.shooting)
+# nogil: multiple shooting runs its segments' kernels on threads (identify.shooting.multiple)
 @numba.njit(cache=True, fastmath=_FAST, nogil=True)
 def simulate_kernel(
     inputs, conn_ptr, conn_kind, conn_src, conn_delay, conn_val, transfer, history, ring, record, stride=1

@@ -454,7 +454,7 @@ class CompiledNetwork:
             Output name -> value, for states initialised from data.
         history : (n_neurons,) array_like, optional
             Every neuron's output before the first step (replaces the file's initial states and `init`):
-            an initial state estimated from data (identify.initstate).
+            an initial state estimated from data (identify.offline.initstate).
         states : (S,) int64, optional
             Neurons whose values follow the outputs' (as in :meth:`jacobian`).
 

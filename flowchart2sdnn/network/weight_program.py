@@ -1,6 +1,6 @@
 """The weights of a compiled network as postfix programs a numba kernel evaluates (the quasi-online kernel).
 
-The quasi-online run (:mod:`flowchart2sdnn.identify.online_kernel`) changes the parameters inside its numba loop, so the connection
+The quasi-online run (:mod:`flowchart2sdnn.identify.online.kernel`) changes the parameters inside its numba loop, so the connection
 values and their theta-derivatives cannot come from the Python runtime: the runtime's weight expressions are
 compiled once into flat arrays of operations (:func:`weight_program`) that :func:`eval_weights` runs.
 """

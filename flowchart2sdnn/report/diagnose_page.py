@@ -18,10 +18,10 @@ from pathlib import Path
 
 from ..data.csvdata import Dataset
 from ..diagnose.loop import Diagnosis
-from ..identify.result import Metrics
+from ..identify import Metrics
 from ..notices import Notice
 from .diagnose_plots import figures
-from .diagnose_text import STOP_MESSAGES, _candidate_rows, _fit_pct
+from .diagnose_text import STOP_MESSAGES, fit_percent_change, shown_candidate_rows
 from .html import chart_section, esc, figure, page, paragraph, section, table
 from .identify_page import identification_sections, status_paragraphs
 
@@ -49,7 +49,7 @@ def _candidates(report: dict, limit: int) -> list[str]:
                        "is accepted. So the accepted effect need not be rank 1.")]
     for r in sorted({c["round"] for c in report["candidates"]}):
         cands = [c for c in report["candidates"] if c["round"] == r]
-        rows, hidden = _candidate_rows(cands, limit)
+        rows, hidden = shown_candidate_rows(cands, limit)
         entry = next((e for e in report["rounds"] if e["round"] == r), None)
         won = (entry["effect"], entry["at"], entry.get("label") or "") if entry and entry["accepted"] else None
         for row in rows:
@@ -72,7 +72,8 @@ def _candidates(report: dict, limit: int) -> list[str]:
 def _rounds(report: dict) -> list[str]:
     rows = [[r["round"], _effect(r), "yes" if r["accepted"] else "no", _arrow(r["rms_before"], r["rms_after"]),
              _arrow(r["validation_rms_before"], r["validation_rms_after"]),
-             _arrow(r["aic_before"], r["aic_after"], 8), _fit_pct(r.get("before") or {}, r.get("after") or {})]
+             _arrow(r["aic_before"], r["aic_after"], 8),
+             fit_percent_change(r.get("before") or {}, r.get("after") or {})]
             for r in report["rounds"]]
     parts = [table(["round", "effect", "accepted", "train RMS", "validation RMS", "AIC", "val fit %"], rows,
                    left=3)] if rows else []

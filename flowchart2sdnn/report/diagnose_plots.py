@@ -19,8 +19,7 @@ import numpy as np
 from ..data.csvdata import Dataset
 from ..diagnose.loop import Diagnosis, Fitted
 from ..fit.correlation import LEVEL, bound, xcorr
-from ..identify.compare import signal_units
-from ..identify.problem import build_problem
+from ..identify import build_problem, signal_units
 from .canvas import new_figure, save_png
 from .figures import axis_label, resid_figure, safe_name
 from .linear import residual_lags

@@ -2,11 +2,11 @@
 
 from __future__ import annotations
 
-from ..identify.document import from_document
+from ..identify import from_document
 from ..tables import table
 from .identify_text import format_result
 
-__all__ = ["format_report", "STOP_MESSAGES"]
+__all__ = ["format_report", "STOP_MESSAGES", "shown_candidate_rows", "fit_percent_change"]
 
 STOP_MESSAGES = {
     "rounds": "the round limit (--rounds) was reached",
@@ -29,7 +29,7 @@ def _arrow(a, b, digits: int = 4) -> str:
     return f"{_g(a, digits)} -> {_g(b, digits)}" if b is not None else _g(a, digits)
 
 
-def _candidate_rows(cands: list[dict], limit: int) -> tuple[list[list], int]:
+def shown_candidate_rows(cands: list[dict], limit: int) -> tuple[list[list], int]:
     """The best option of each (effect, place) and every refitted candidate, at most `limit` others."""
     rows, hidden, seen = [], 0, set()
     for c in cands:
@@ -72,7 +72,7 @@ def format_report(report: dict, limit: int = 10) -> str:
     rounds = sorted({c["round"] for c in report["candidates"]})
     for r in rounds:
         cands = [c for c in report["candidates"] if c["round"] == r]
-        rows, hidden = _candidate_rows(cands, limit)
+        rows, hidden = shown_candidate_rows(cands, limit)
         out.append("")
         out.append(f"round {r}: {len(cands)} candidates scored (score = predicted decrease of the cost E by one "
                    "Gauss-Newton step)")
@@ -90,7 +90,7 @@ def format_report(report: dict, limit: int = 10) -> str:
                          "yes" if r["accepted"] else "no", _arrow(r["rms_before"], r["rms_after"]),
                          _arrow(r["validation_rms_before"], r["validation_rms_after"]),
                          _arrow(r["aic_before"], r["aic_after"], 8),
-                         _fit_pct(a, b)])
+                         fit_percent_change(a, b)])
         out.append(table(["round", "effect", "accepted", "train RMS", "validation RMS", "AIC", "val fit %"],
                          rows).rstrip())
         for r in report["rounds"]:
@@ -122,7 +122,7 @@ def format_report(report: dict, limit: int = 10) -> str:
     return "\n".join(out) + "\n"
 
 
-def _fit_pct(a: dict, b: dict) -> str:
+def fit_percent_change(a: dict, b: dict) -> str:
     va, vb = a.get("validation_fit_percent") or [], b.get("validation_fit_percent") or []
     if not va:
         return ""

@@ -23,7 +23,7 @@ from pathlib import Path
 import numpy as np
 
 from ..fit.correlation import LEVEL, MAX_LAG, bound, whiteness, xcorr
-from ..identify.compare import Comparison
+from ..identify import Comparison
 from .canvas import new_figure, require_matplotlib, save_png
 
 __all__ = ["axis_label", "compare_figure", "write_compare", "resid_figure", "write_resid", "safe_name",

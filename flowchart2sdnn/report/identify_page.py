@@ -22,7 +22,7 @@ from pathlib import Path
 import numpy as np
 
 from ..analysis.response import empirical_response
-from ..identify.compare import compare_fit, record_theta, signal_units
+from ..identify import compare_fit, record_theta, signal_units
 from .bode import bode_figure
 from .figures import compare_figure, fit_number, resid_figure, residual_time_figure, verdict
 from .html import chart_section, esc, figure, page, paragraph, section

@@ -27,8 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from ..errors import SdnnError
-from ..identify.arrays import columns_of
-from ..identify.compare import compare_fit, record_theta, signal_units
+from ..identify import columns_of, compare_fit, record_theta, signal_units
 from .canvas import new_figure, require_matplotlib, save_png
 from .figures import axis_label, write_compare, write_resid
 from .linear import residual_lags
@@ -230,7 +229,7 @@ def write_plots(outcome, directory: str | Path, records=(), validation=(), lags:
     Parameters
     ----------
     outcome : Identification
-        What :func:`flowchart2sdnn.identify.run.identify` returned.
+        What :func:`flowchart2sdnn.identify.offline.run.identify` returned.
     directory : str or Path
         Existing PNGs of the same names are replaced (atomically).
     records, validation : sequences of (label, Dataset, score_from), optional

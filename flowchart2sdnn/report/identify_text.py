@@ -5,7 +5,7 @@ from __future__ import annotations
 from collections.abc import Sequence
 
 from ..fit.stoprule import status_line as rule_line
-from ..identify.result import Identification
+from ..identify import Identification
 from ..notices import Notice
 from ..tables import table
 
@@ -87,7 +87,7 @@ def format_result(result: Identification, fixed_from: Sequence[str] = ()) -> str
 
 
 def _floor(result: Identification) -> str | None:
-    """The discretization floor beside the training RMS (identify.floor), or why it was not measured."""
+    """The discretization floor beside the training RMS (identify.assess.floor), or why it was not measured."""
     floor = (result.extra.get("discretization") or {}).get("floor")
     if not isinstance(floor, dict):
         return None
@@ -102,7 +102,7 @@ def _floor(result: Identification) -> str | None:
 
 
 def _shooting(result: Identification) -> str | None:
-    """What multiple shooting did: auto's choice and the stage whose fit is the result (identify.shooting)."""
+    """What multiple shooting did: auto's choice and the stage whose fit is the result (identify.shooting.multiple)."""
     s = result.extra.get("shooting")
     if not isinstance(s, dict):
         return None

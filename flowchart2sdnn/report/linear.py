@@ -11,7 +11,7 @@ import numpy as np
 from ..analysis.linearize import linearize
 from ..analysis.response import MIN_LAGS, lags_for
 from ..errors import SdnnError
-from ..identify.compare import record_theta
+from ..identify import record_theta
 
 __all__ = ["linear_model", "residual_lags"]
 

@@ -14,8 +14,7 @@ from __future__ import annotations
 from html import escape
 
 from ..diagnose.result import Diagnosis, FitSummary
-from ..identify.result import Identification
-from ..identify.rows import fit_rows, parameter_rows
+from ..identify import Identification, fit_rows, parameter_rows
 from ..tables import table
 from .diagnose_text import STOP_MESSAGES
 

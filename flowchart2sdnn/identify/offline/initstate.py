@@ -24,13 +24,13 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from .. import rules
-from ..data.csvdata import Dataset
-from ..errors import SdnnError
-from ..fit.lm import LMOptions, levenberg_marquardt
-from ..fit.uncertainty import covariance
-from ..network.alignment import run_aligned
-from ..network.flat import KIND_NEURON, signal_names
+from ... import rules
+from ...data.csvdata import Dataset
+from ...errors import SdnnError
+from ...fit.lm import LMOptions, levenberg_marquardt
+from ...fit.uncertainty import covariance
+from ...network.alignment import run_aligned
+from ...network.flat import KIND_NEURON, signal_names
 from .problem import columns_of
 
 __all__ = ["InitialStateFit", "state_neurons", "estimate_initial_state", "FD_STEP"]

@@ -11,12 +11,12 @@ from dataclasses import replace
 
 import numpy as np
 
-from .. import rules
-from ..errors import SdnnError
-from ..fit.uncertainty import covariance
-from ..notices import Notice
-from .problem import CHATTER_LIMIT, GROWTH_LIMIT, Problem
-from .result import Uncertainty
+from ... import rules
+from ...errors import SdnnError
+from ...fit.uncertainty import covariance
+from ...notices import Notice
+from ..offline.problem import CHATTER_LIMIT, GROWTH_LIMIT, Problem
+from ..result import Uncertainty
 
 __all__ = ["sqrt_domain_warnings", "start_stability", "on_bound_warnings", "no_excitation_message", "Evidence", "assess", "CHATTER_WARN"]
 

@@ -2,7 +2,7 @@
 
 The model runs free alongside the record with the accepted parameters; RTRL gives each new sample's
 Jacobian row; a FIFO window keeps the last Q rows and the running sums of the normal equations. Two ways to
-step (the numba kernel :mod:`.online_kernel` states both and why):
+step (the numba kernel :mod:`.kernel` states both and why):
 
 * window mode (``tries >= 1``, default): every ``block`` samples one trainlm iteration on the window, each
   trial judged by simulating the window's samples again at it, an accepted trial relinearising the window
@@ -33,12 +33,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from ..errors import SdnnError
-from ..fit.damping import TRAINLM_MU0
-from ..fit.transforms import Bounds
-from ..network.runtime import CompiledNetwork
-from . import online_kernel as ok
-from .settings import ONLINE_TAU
+from ...errors import SdnnError
+from ...fit.damping import TRAINLM_MU0
+from ...fit.transforms import Bounds
+from ...network.runtime import CompiledNetwork
+from ..settings import ONLINE_TAU
+from . import kernel as ok
 
 __all__ = ["OnlineOptions", "OnlineResult", "OnlineRun", "OnlineStart", "quasi_online", "STATUS_MESSAGES"]
 

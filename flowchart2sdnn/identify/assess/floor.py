@@ -17,13 +17,13 @@ from collections.abc import Sequence
 
 import numpy as np
 
-from .. import rules
-from ..analysis.loops import delay_rule
-from ..data.csvdata import Dataset
-from ..diagram.model import Diagram
-from ..network.alignment import fitted_rows, run_aligned
-from ..notices import Notice
-from .problem import columns_of, data_init, network_input_names
+from ... import rules
+from ...analysis.loops import delay_rule
+from ...data.csvdata import Dataset
+from ...diagram.model import Diagram
+from ...network.alignment import fitted_rows, run_aligned
+from ...notices import Notice
+from ..offline.problem import columns_of, data_init, network_input_names
 
 __all__ = ["FLOOR_WARN", "oracle_steps", "oracle_rows", "oracle_runs", "measure_floor", "floor_warnings",
            "pooled_floor"]
@@ -50,7 +50,7 @@ def _oracle_init(chart: Diagram, data: Dataset) -> dict[str, float]:
 
 def oracle_rows(chart: Diagram, data: Dataset, alignment: str, steps: int, names: Sequence[str]) -> np.ndarray:
     """The oracle's outputs `names` on every row of `data`, row k where the network's row k stands (Q, len(names))."""
-    from ..simulate.continuous import simulate_continuous
+    from ...simulate.continuous import simulate_continuous
 
     u = columns_of(data, chart.input_names)
     if alignment == "zoh":  # row k of both is the chart at t_k, input k held over [t_k, t_k+1)
@@ -62,7 +62,7 @@ def oracle_rows(chart: Diagram, data: Dataset, alignment: str, steps: int, names
 
 def oracle_runs(chart: Diagram, records: Sequence[Dataset], alignment: str, compiled) -> list[np.ndarray]:
     """The oracle's run of `chart` on every record (:func:`oracle_rows` at the network's steps, its output
-    order): computed once where the floor and the bias (identify.floorbias) both need it."""
+    order): computed once where the floor and the bias (identify.assess.floorbias) both need it."""
     steps = oracle_steps(compiled.net.substeps)
     return [oracle_rows(chart, d, alignment, steps, compiled.output_names) for d in records]
 

@@ -2,7 +2,7 @@
 
 A work unit of a multi-start fit is a :class:`FitTask` (the network file as JSON, the aligned data arrays and
 the rest of the fitting problem, the bounds and LM options) plus one start vector; :func:`fit_start` rebuilds the
-:class:`~flowchart2sdnn.identify.problem.Problem` in the worker (once per worker: a small cache keyed by the
+:class:`~flowchart2sdnn.identify.offline.problem.Problem` in the worker (once per worker: a small cache keyed by the
 task's hash) and runs :func:`~flowchart2sdnn.fit.lm.levenberg_marquardt`. The serial path runs the same
 function through :class:`~flowchart2sdnn.executors.SerialExecutor`, so every executor gives bit-identical
 results for the same seed. Results come back as the same frozen
@@ -24,8 +24,8 @@ from typing import Any
 
 import numpy as np
 
-from ..fit.lm import LMResult, levenberg_marquardt
-from .shooting import shooting_fit
+from ...fit.lm import LMResult, levenberg_marquardt
+from ..shooting.multiple import shooting_fit
 
 __all__ = ["FitTask", "fit_task", "problem_of", "run_start", "fit_start", "run_quasi_online_start",
            "quasi_online_start"]
@@ -52,8 +52,8 @@ class FitTask:
     options : LMOptions (fit_start) or OnlineOptions (quasi_online_start)
     key : str               sha256 of the network file and the problem fields: the worker's cache key
                             (bounds and options are not cached, they travel with every unit)
-    shooting : int          multiple-shooting segment length (0: single shooting; identify.shooting)
-    shooting_starts : str   "data" or "free": the measured states' segment starts (identify.shooting)
+    shooting : int          multiple-shooting segment length (0: single shooting; identify.shooting.multiple)
+    shooting_starts : str   "data" or "free": the measured states' segment starts (identify.shooting.multiple)
     """
 
     network_json: str
@@ -69,7 +69,7 @@ class FitTask:
 
 def fit_task(problem, lower: np.ndarray, upper: np.ndarray, options: Any, shooting: int = 0,
              shooting_starts: str = "data") -> FitTask:
-    """The work unit of a multi-start fit of ``problem`` (an identify.problem.Problem).
+    """The work unit of a multi-start fit of ``problem`` (an identify.offline.problem.Problem).
 
     Every field of the Problem but the chart and the compiled network travels as it is, so that the worker's
     Problem behaves exactly as the caller's (a field added to Problem later travels too).
@@ -88,8 +88,8 @@ _cache_lock = threading.Lock()
 
 def problem_of(task: FitTask):
     """The Problem of a task, built once per worker process (thread-safe for in-process Dask workers)."""
-    from ..network.model import Network
-    from ..network.runtime import CompiledNetwork
+    from ...network.model import Network
+    from ...network.runtime import CompiledNetwork
     from .problem import Problem
 
     with _cache_lock:
@@ -124,11 +124,11 @@ def run_start(problem, start: np.ndarray, lower: np.ndarray, upper: np.ndarray, 
     callback : callable ``callback(iteration, x, cost, mu) -> bool``, optional
         Progress and stop (True stops) after each iteration; only where the caller's process runs the fit.
     shooting : int
-        > 0: multiple shooting with segments of this many samples first (identify.shooting.shooting_fit).
+        > 0: multiple shooting with segments of this many samples first (identify.shooting.multiple.shooting_fit).
     threads : int
         threads for multiple shooting's segments.
     shooting_starts : str
-        "data": measured states start each segment from the data; "free": they are free too (identify.shooting).
+        "data": measured states start each segment from the data; "free": they are free too (identify.shooting.multiple).
     """
     own = problem.from_start(start)
     if shooting:
@@ -161,9 +161,9 @@ def run_quasi_online_start(problem, start: np.ndarray, lower: np.ndarray, upper:
 
     Returns
     -------
-    flowchart2sdnn.identify.online.OnlineStart
+    flowchart2sdnn.identify.online.run.OnlineStart
     """
-    from .online import OnlineStart, quasi_online
+    from ..online.run import OnlineStart, quasi_online
 
     return OnlineStart(quasi_online(problem.compiled, problem.inputs, problem.targets,
                                     np.asarray(start, dtype=float), lower, upper, options, init=problem.init,

@@ -1,6 +1,6 @@
-"""The window numerics of the quasi-online LM run (:mod:`.online_kernel` states the algorithm).
+"""The window numerics of the quasi-online LM run (:mod:`.kernel` states the algorithm).
 
-numba functions on the arrays of :class:`.online_kernel.OnlineState`: the bound transform and the weights at
+numba functions on the arrays of :class:`.kernel.OnlineState`: the bound transform and the weights at
 a parameter point, the FIFO window's running sums of the normal equations, the damped LM step by Cholesky,
 and the window mode's iteration (simulate the window's samples again at a trial, relinearise an accepted
 one). The network steps are those of the offline kernels (:func:`flowchart2sdnn.network.kernels.rtrl_step`,
@@ -18,9 +18,9 @@ import math
 import numba
 import numpy as np
 
-from ..fit import damping
-from ..network.kernels import ix, rtrl_step, simulate_step
-from ..network.weight_program import eval_weights
+from ...fit import damping
+from ...network.kernels import ix, rtrl_step, simulate_step
+from ...network.weight_program import eval_weights
 
 F_MU, F_EE, F_CC, F_CH, F_NL = range(5)
 (I_COUNT, I_HEAD, I_STEPS, I_BLOCK_POS, I_ACCEPTED, I_REJECTED, I_DIVERGED, I_CHOL_FALLBACK,
@@ -95,7 +95,7 @@ def cholesky_solve(M, rhs, L, out):
 
 
 @numba.njit(cache=True)
-def _set(u, x, dxdu, conn_val, dval, bnd, wp, stack):
+def weights_at(u, x, dxdu, conn_val, dval, bnd, wp, stack):
     """x, dx/du and the weights at u; False when a weight is not finite."""
     external(u, bnd[0], bnd[1], bnd[2], x, dxdu)
     return eval_weights(x, wp, conn_val, dval, stack)
@@ -178,7 +178,7 @@ def resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its):
 
 
 @numba.njit(cache=True)
-def _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its):
+def push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its):
     """FIFO: drop the oldest row when the window is full, add (J, e); resync every Q pushes."""
     window, n_out, n_theta = win_J.shape
     h = its[I_HEAD]
@@ -216,7 +216,7 @@ def _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its):
 
 
 @numba.njit(cache=True)
-def _lm_step(A, b, u_ref, u, mu, mu_inc, M, L, g, delta, its):
+def lm_step(A, b, u_ref, u, mu, mu_inc, M, L, g, delta, its):
     """The LM step from u: (A + mu I) delta = g = b - A (u - u_ref) by Cholesky. When rounding makes the matrix
     indefinite the damping grows from 1e-14 max diag(A) (it is then a numerical regularisation, not mu).
     False when nothing works (no step)."""
@@ -398,7 +398,7 @@ def window_rtrl(inputs, targets, net, stm, wnd, win_state, win_time, its, slot_o
 
 
 @numba.njit(cache=True)
-def _window_iteration(inputs, targets, net, wp, bnd, fopt, tries, stm, stt, wnd, rsm, fs, its, stack, slot_of,
+def window_iteration(inputs, targets, net, wp, bnd, fopt, tries, stm, stt, wnd, rsm, fs, its, stack, slot_of,
                       M, L, g, delta, dn, dn2):
     """One LM iteration on the window (module docstring, window mode): up to `tries` trials, each judged by
     the window cost of a new simulation at the trial; the accepted one is relinearised."""
@@ -411,17 +411,17 @@ def _window_iteration(inputs, targets, net, wp, bnd, fopt, tries, stm, stt, wnd,
     for _ in range(tries):
         if its[I_ACCEPTED] + its[I_REJECTED] == 0 and tau > 0.0:
             fs[F_MU] = scaled_mu(A, fs[F_MU], tau, mu_max)
-        if not _lm_step(A, b, u_ref, u, fs[F_MU], mu_inc, M, L, g, delta, its):
+        if not lm_step(A, b, u_ref, u, fs[F_MU], mu_inc, M, L, g, delta, its):
             break
         for p in range(u.shape[0]):
             u_tr[p] = u[p] + delta[p]
         cost = math.inf
-        if _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack):
+        if weights_at(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack):
             cost = window_sim(inputs, targets, net, conn_tr, win_state, win_time, its, a_tr, slot_of, e_tr,
                               tr_state, cost_u)
         if cost < cost_u:
             u[:] = u_tr
-            _set(u, x, dxdu, conn_val, dval, bnd, wp, stack)
+            weights_at(u, x, dxdu, conn_val, dval, bnd, wp, stack)
             window_rtrl(inputs, targets, net, stm, wnd, win_state, win_time, its, slot_of, dn, dn2)
             u_ref[:] = u  # the rows are fresh at u: no first-order shift
             resync(win_J, win_c, win_e, A, b, u_ref, u, fs, its)
@@ -431,4 +431,4 @@ def _window_iteration(inputs, targets, net, wp, bnd, fopt, tries, stm, stt, wnd,
         fs[F_MU] = mu_refused(fs[F_MU], mu_inc, mu_max)
         its[I_REJECTED] += 1
     u_tr[:] = u
-    _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)
+    weights_at(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)

@@ -20,8 +20,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from .. import rules
-from ..notices import Notice
+from ... import rules
+from ...notices import Notice
 
 __all__ = ["LAG_ZERO_Z", "LAG_ZERO_MIN", "lag_zero_correlations", "lag_zero_warnings"]
 

@@ -1,6 +1,6 @@
 """Per-record parameters (`per_record: true`): their values per training record, with intervals, and the mean.
 
-With several training records the Problem fits one value of such a parameter per record (identify.problem:
+With several training records the Problem fits one value of such a parameter per record (identify.offline.problem:
 the network's weight for it switches from record to record, the other parameters are shared). The chart's own
 value, the `parameters` entry of RESULT.json and the identified chart's `init`, is the mean over the training
 records: that is what a record without a fit of its own (a validation record without `--init-window`) runs

@@ -15,13 +15,13 @@ from dataclasses import replace
 
 import numpy as np
 
-from ..compiler import compile_diagram
-from ..data.csvdata import Dataset
-from ..diagram.curves import basis_weights, needs_span
-from ..diagram.model import Diagram
-from ..errors import SdnnError
-from ..network.alignment import network_inputs
-from ..network.runtime import CompiledNetwork
+from ...compiler import compile_diagram
+from ...data.csvdata import Dataset
+from ...diagram.curves import basis_weights, needs_span
+from ...diagram.model import Diagram
+from ...errors import SdnnError
+from ...network.alignment import network_inputs
+from ...network.runtime import CompiledNetwork
 from .arrays import columns_of, data_init, network_input_names
 
 __all__ = ["with_spans", "input_span"]

@@ -1,6 +1,6 @@
 """The discretization's bias on each parameter, by a parametric-bootstrap refit (identify, on by default).
 
-A fit bends the parameters to absorb the network's own step error (identify.floor): at the optimum theta^ of
+A fit bends the parameters to absorb the network's own step error (identify.assess.floor): at the optimum theta^ of
 the data the network matches the machine, not the chart at theta^. To see by how much, the continuous oracle
 runs the *fitted* chart (theta^) on the training input, from the same initial states; that noise-free record is
 what a plant with exactly theta^ would have given. The network fits it from theta^ (a few LM iterations: the
@@ -11,7 +11,7 @@ it by |beta| on both sides (ci95; the noise's alone stays as ci95_noise). With 0
 benches (auto N, seeds 1-10) that took the parameters whose interval covers the truth 8 in 10 times from 13 of 21
 to 21 of 21, at x1.24-1.33 the fit's time (benchmarks/bench_floor_acceptance.py).
 
-Layer: identify (below it: simulate's oracle through identify.floor, fit, network, data).
+Layer: identify (below it: simulate's oracle through identify.assess.floor, fit, network, data).
 """
 
 from __future__ import annotations
@@ -21,15 +21,15 @@ from dataclasses import replace
 
 import numpy as np
 
-from .. import rules
-from ..data.csvdata import Dataset
-from ..diagram.model import Diagram
-from ..fit.lm import LMOptions
-from ..network.alignment import fitted_rows
-from ..notices import Notice
+from ... import rules
+from ...data.csvdata import Dataset
+from ...diagram.model import Diagram
+from ...fit.lm import LMOptions
+from ...network.alignment import fitted_rows
+from ...notices import Notice
+from ..offline.problem import Problem
+from ..offline.workers import run_start
 from .floor import oracle_runs, oracle_steps
-from .problem import Problem
-from .workers import run_start
 
 __all__ = ["BIAS_ITER", "BETA_SETTLED", "BIAS_WARN", "estimate_floor_bias", "floor_bias_warnings"]
 

@@ -8,20 +8,21 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .. import rules
-from ..compiler import compile_diagram
-from ..data.csvdata import Dataset
-from ..diagram.model import Diagram
-from ..errors import SdnnError
-from ..network.alignment import fitted_rows, network_inputs, run_aligned
-from ..network.model import Network
-from ..network.runtime import CompiledNetwork
-from ..network.stability import rest_radii
-from ..strictjson import finite_or_none
+from ... import rules
+from ...compiler import compile_diagram
+from ...data.csvdata import Dataset
+from ...diagram.model import Diagram
+from ...errors import SdnnError
+from ...network.alignment import fitted_rows, network_inputs, run_aligned
+from ...network.model import Network
+from ...network.runtime import CompiledNetwork
+from ...network.stability import rest_radii
+from ...strictjson import finite_or_none
 from .arrays import columns_of, data_init, network_input_names
 from .curvespan import with_spans
 
-__all__ = ["Problem", "columns_of", "Segment", "build_problem", "metrics", "combined_metrics", "data_init", "required_columns", "CHATTER_LIMIT"]
+__all__ = ["Problem", "columns_of", "Segment", "build_problem", "metrics", "combined_metrics", "data_init", "required_columns", "CHATTER_LIMIT",
+           "interruptible"]
 
 #: A trial step whose network chatters at rest (see network.stability) by more than this is rejected.
 CHATTER_LIMIT = rules.value("chatter_limit")
@@ -34,7 +35,7 @@ def required_columns(diagram: Diagram) -> list[str]:
 
 
 @contextmanager
-def _interruptible():
+def interruptible():
     """Let Ctrl-C inside a numba kernel surface as KeyboardInterrupt (the trainer's clean stop).
 
     A SIGINT that arrives while compiled code runs is raised when numba next calls back into Python, where it
@@ -126,7 +127,7 @@ class Problem:
         es, js = [], []
         index = self.record_index()
         for k, s in enumerate(self.segments):
-            with _interruptible():
+            with interruptible():
                 yhat, jac = self.compiled.jacobian(self.record_x(x, k) if index else x, s.inputs, s.init)
             if not np.all(np.isfinite(yhat)) or not np.all(np.isfinite(jac)):
                 return None
@@ -149,7 +150,7 @@ class Problem:
         es = []
         index = self.record_index()
         for k, s in enumerate(self.segments):
-            with _interruptible():
+            with interruptible():
                 yhat = self.compiled.simulate(self.record_x(x, k) if index else x, s.inputs, s.init)
             if not np.all(np.isfinite(yhat)):
                 return None
@@ -214,7 +215,7 @@ def build_problem(diagram: Diagram, data: Dataset, alignment: str = "zoh", seed:
     """Compile `diagram` (unless `network` is given) and align `data` (and the records in `more`) to it.
 
     Learned curves of the tanh basis without slopes get them over their input's range in the records
-    (identify.curvespan); the problem's `diagram` is the chart with them."""
+    (identify.offline.curvespan); the problem's `diagram` is the chart with them."""
     if network is None:
         diagram, _ = with_spans(diagram, (data, *more), alignment)
         network = compile_diagram(diagram, seed=seed).network
@@ -262,7 +263,7 @@ def metrics(compiled: CompiledNetwork, x: np.ndarray, data: Dataset, alignment: 
             score_from: int = 0, history: np.ndarray | None = None, segments: int = 0) -> dict:
     """Free-run fit metrics on a record: cost E (eq. 4), RMS and fit % per output, on rows >= score_from.
 
-    `history` (every neuron's value before the first step, see identify.initstate) replaces the initial state.
+    `history` (every neuron's value before the first step, see identify.offline.initstate) replaces the initial state.
     `segments` > 0 adds ``"segments"``: [[rows, squared error summed over every output], ...] on that many
     consecutive equal parts of the scored rows (how the error spreads along the record; diagnose's refusal).
     """

@@ -10,8 +10,8 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..data.csvdata import Dataset
-from ..network.model import Network
+from ...data.csvdata import Dataset
+from ...network.model import Network
 
 __all__ = ["columns_of", "data_init", "network_input_names"]
 

@@ -30,7 +30,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-from .. import rules
+from ... import rules
 from .problem import CHATTER_LIMIT, Problem
 from .workers import run_start
 

@@ -43,10 +43,12 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .. import rules
-from .initstate import state_neurons
-from .problem import Problem
-from .shooting import GROWTH, MAX_SEGMENTS, NOISE_MARGIN, noise_cost, stage_lengths
+from ... import rules
+from ..assess.noise import NOISE_MARGIN, noise_cost
+from ..offline.initstate import state_neurons
+from ..offline.problem import Problem
+from .multiple import GROWTH, stage_lengths
+from .segmented import MAX_SEGMENTS
 
 __all__ = ["ShootingChoice", "choose_shooting", "amplification", "GROWTH_BOUND", "DELTA", "SHORTER", "SUSPECT_PEAK",
            "second_look", "chaotic_at"]
@@ -55,7 +57,7 @@ __all__ = ["ShootingChoice", "choose_shooting", "amplification", "GROWTH_BOUND",
 GROWTH_BOUND = rules.value("growth_bound")
 #: The first stage is this many times shorter than one Lyapunov time of the chart at its `init` (two merges,
 #: GROWTH ** 2): the rough chart's growth is not the truth's (module docstring), and the merging stages find the
-#: predictable length from the data (identify.shooting's refusal rule).
+#: predictable length from the data (identify.shooting.multiple's refusal rule).
 SHORTER = GROWTH * GROWTH
 #: auto's second look (:func:`second_look`) is for charts whose probe grew a moved start more than this: beyond
 #: the stable charts' 95th percentile (3.9 over the test suite's fits; module docstring).

@@ -4,7 +4,7 @@ One call of :func:`online_chunk` advances the run over samples ``[t0, t1)``; all
 caller allocates once (:func:`new_state`) and the kernel mutates, so a run can be cut into chunks (progress,
 Ctrl-C) without changing a single number. Two algorithms share the window and the model:
 
-**Window mode** (``tries >= 1``, the default of :class:`flowchart2sdnn.identify.online.OnlineOptions`). The model
+**Window mode** (``tries >= 1``, the default of :class:`flowchart2sdnn.identify.online.run.OnlineOptions`). The model
 runs free with the accepted parameters u and RTRL; every sample's row (``J``, ``e``) enters the FIFO window of Q
 rows together with the network state before that sample. Every ``block`` samples from ``start`` on (fewer
 while the window fills: ``max(min_block, block * rows / Q)``, an iteration costs in proportion to the rows) one
@@ -62,11 +62,11 @@ non-finite model output adopts the trial's parameters and state when they are fi
 the history with zero sensitivities; the sample's row is skipped and the event recorded. Nothing non-finite
 ever enters the window.
 
-Layout: this module holds the state, the per-sample loop and the trial mode; :mod:`.online_window` the window
+Layout: this module holds the state, the per-sample loop and the trial mode; :mod:`.window` the window
 numerics (FIFO sums, the damped step, the window mode's iteration). Both run the network with the offline
 kernels' steps (:mod:`flowchart2sdnn.network.kernels`) and move mu by the offline trainer's schedule
 (:mod:`flowchart2sdnn.fit.damping`). Float state ``fs`` and integer state ``its``: see the ``F_*`` and ``I_*``
-constants of :mod:`.online_window`.
+constants of :mod:`.window`.
 """
 
 from __future__ import annotations
@@ -77,10 +77,10 @@ from dataclasses import dataclass
 import numba
 import numpy as np
 
-from .. import rules
-from ..network.rowops import padded
-from ..network.weight_program import WeightProgram, eval_weights, weight_program  # noqa: F401 - re-exported
-from .online_window import (  # noqa: F401 - re-exported: the run's state layout and window numerics
+from ... import rules
+from ...network.rowops import padded
+from ...network.weight_program import WeightProgram, eval_weights, weight_program  # noqa: F401 - re-exported
+from .window import (  # noqa: F401 - re-exported: the run's state layout and window numerics
     F_CC,
     F_CH,
     F_EE,
@@ -101,20 +101,20 @@ from .online_window import (  # noqa: F401 - re-exported: the run's state layout
     I_STEPS,
     N_FS,
     N_ITS,
-    _lm_step,
-    _push_row,
-    _set,
-    _window_iteration,
     cholesky_solve,
     external,
+    lm_step,
     mu_accepted,
     mu_refused,
+    push_row,
     resync,
     rtrl,
     rtrl_sample,
     scaled_mu,
     simulate,
     simulate_sample,
+    weights_at,
+    window_iteration,
     window_rtrl,
     window_sim,
 )
@@ -235,10 +235,10 @@ def new_state(u0: np.ndarray, n_connections: int, n_slots: int, history: np.ndar
 def prepare(st_model, st_trial, bnd, wp, stack):
     """Weights of the model and the trial at their start parameters; False when they are not finite."""
     u, x, dxdu, conn_val, dval = st_model[0], st_model[1], st_model[2], st_model[3], st_model[4]
-    ok = _set(u, x, dxdu, conn_val, dval, bnd, wp, stack)
+    ok = weights_at(u, x, dxdu, conn_val, dval, bnd, wp, stack)
     u_tr, x_tr, dxdu_tr, conn_tr, dval_tr = st_trial[0], st_trial[1], st_trial[2], st_trial[3], st_trial[4]
     u_tr[:] = u
-    _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)
+    weights_at(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)
     return ok
 
 
@@ -257,7 +257,7 @@ def _new_block(stm, stt, bnd, wp, stack, fs, its):
     u, a_buf, s_blk = stm[0], stm[5], stm[7]
     u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, a_tr = stt[0], stt[1], stt[2], stt[3], stt[4], stt[5]
     u_tr[:] = u
-    _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)
+    weights_at(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)
     a_tr[:, :] = a_buf
     s_blk[:, :, :] = 0.0
     fs[F_CH] = 0.0
@@ -270,7 +270,7 @@ def _adopt_trial(stm, stt, bnd, wp, stack):
     """The model takes the trial's parameters and state (its sensitivities are kept: first order)."""
     u, x, dxdu, conn_val, dval, a_buf = stm[0], stm[1], stm[2], stm[3], stm[4], stm[5]
     u[:] = stt[0]
-    _set(u, x, dxdu, conn_val, dval, bnd, wp, stack)
+    weights_at(u, x, dxdu, conn_val, dval, bnd, wp, stack)
     a_buf[:, :] = stt[5]
 
 
@@ -368,7 +368,7 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
             _new_block(stm, stt, bnd, wp, stack, fs, its)
         elif replay:
             h = its[I_HEAD]
-            _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its)
+            push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its)
             win_state[h] = before
             win_time[h] = t
             if active:
@@ -376,14 +376,14 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
                 # an iteration costs in proportion to the rows: iterate more often while the window fills
                 if its[I_BLOCK_POS] >= max(min_block, (block * its[I_COUNT]) // window):
                     its[I_BLOCK_POS] = 0
-                    _window_iteration(inputs, targets, net, wp, bnd, fopt, tries, stm, stt, wnd, rsm, fs, its,
+                    window_iteration(inputs, targets, net, wp, bnd, fopt, tries, stm, stt, wnd, rsm, fs, its,
                                       stack, slot_of, M, L, g, delta, dn, dn2)
                 k = its[I_STEPS] % avg_x.shape[0]  # window mode: every sample from `start` is a step
                 avg_x[k, :] = x
                 avg_cost[k] = 0.5 * max(fs[F_EE], 0.0)
                 its[I_STEPS] += 1
         else:
-            _push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its)
+            push_row(e, J, win_J, win_c, win_e, A, b, u_ref, u, fs, its)
             if active and not trial_ok:
                 _note_divergence(t, div_t, its)
                 its[I_REJECTED] += 1
@@ -403,13 +403,13 @@ def online_chunk(t0, t1, inputs, targets, net, wp, bnd, fopt, iopt, stm, stt, wn
                         its[I_REJECTED] += 1
                     _new_block(stm, stt, bnd, wp, stack, fs, its)
                 if (t - start) % every == 0:
-                    if _lm_step(A, b, u_ref, u, fs[F_MU], mu_inc, M, L, g, delta, its):
+                    if lm_step(A, b, u_ref, u, fs[F_MU], mu_inc, M, L, g, delta, its):
                         u_save[:] = u_tr
                         for p in range(n_theta):
                             u_tr[p] = u[p] + delta[p]
-                        if not _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack):
+                        if not weights_at(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack):
                             u_tr[:] = u_save  # a gain such as 1/J2 failed there: keep the previous trial
-                            _set(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)
+                            weights_at(u_tr, x_tr, dxdu_tr, conn_tr, dval_tr, bnd, wp, stack)
                             _note_divergence(t, div_t, its)
                     k = its[I_STEPS] % avg_x.shape[0]
                     avg_x[k, :] = x
