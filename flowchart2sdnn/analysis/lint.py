@@ -20,9 +20,11 @@
 from __future__ import annotations
 
 from fractions import Fraction
+from functools import partial
 
 import numpy as np
 
+from ..diagram.blocks import block_types
 from ..diagram.curves import describe_curve
 from ..diagram.model import Block, Diagram
 from ..diagram.units import DIMENSIONLESS, Unit, UnitError, parse_unit, unit_of_expr
@@ -197,21 +199,23 @@ def _units(diagram: Diagram):
                                     f"{unit[name]}", _loc(diagram, diagram.block(name)), name))
         unit.setdefault(name, u)
     reported: set[str] = set()
-    second = parse_unit("s")
-    products: dict[tuple[Unit, Unit], Unit] = {}  # Unit arithmetic is Fraction-heavy; charts repeat a few
-
-    def times(a: Unit, b: Unit) -> Unit:
-        key = (a, b)
-        if key not in products:
-            products[key] = a * b
-        return products[key]
 
     # a block is evaluated again only when one of its inputs got a unit since its last evaluation: the
     # result cannot change otherwise, and re-evaluating every block in every pass is quadratic on long chains
     version: dict[str, int] = dict.fromkeys(unit, 0)
     evaluated: dict[str, int] = {}
     clock = 0
-    gain_units: dict[str, Unit | None] = {}
+    k_units: dict[str, Unit | None] = {}
+
+    def k_unit(b: Block) -> Unit | None:
+        if b.k is None:
+            return DIMENSIONLESS
+        if b.name not in k_units:
+            k_units[b.name] = None  # a UnitError below leaves it unknown, reported once
+            k_units[b.name] = _unit_of_k(b.k, pu)
+        return k_units[b.name]
+
+    rules = {kind: bt.unit for kind, bt in block_types().items()}
     for _ in range(len(diagram.blocks) + 1):  # fixed point: feedback signals get units from declared ones
         changed = False
         for b in diagram.blocks:
@@ -232,18 +236,6 @@ def _units(diagram: Diagram):
                                 f"sum of unlike units: '{known[0][0]}' is {known[0][1]} but '{sig}' is {u}",
                                 _loc(diagram, b), b.name))
                     computed = known[0][1] if known and len(known) == len(ins) else None
-                elif b.kind == "gain" and ins[0] is not None:
-                    if b.name not in gain_units:
-                        gain_units[b.name] = None  # a UnitError below leaves it unknown, reported once
-                        gain_units[b.name] = _unit_of_k(b.k, pu)
-                    ku = gain_units[b.name]
-                    computed = times(ins[0], ku) if ku is not None else None
-                elif b.kind == "integrator" and ins[0] is not None:
-                    computed = times(ins[0], second)
-                elif b.kind == "delay":
-                    computed = ins[0]
-                elif b.kind == "constant":
-                    computed = _unit_of_k(b.k, pu)
                 elif b.kind == "function":
                     computed = DIMENSIONLESS
                     ku = _unit_of_k(b.k, pu) if b.k is not None else DIMENSIONLESS
@@ -256,12 +248,8 @@ def _units(diagram: Diagram):
                         diags.append(Diagnostic("LINT009", "warning",
                                                 f"argument of {b.f} has unit {arg}, expected dimensionless",
                                                 _loc(diagram, b), b.name))
-                elif b.kind == "product" and all(u is not None for u in ins):
-                    ku = _unit_of_k(b.k, pu) if b.k is not None else DIMENSIONLESS
-                    if ku is not None:
-                        computed = ku
-                        for u in ins:
-                            computed = times(computed, u)
+                elif rules.get(b.kind) is not None:  # the kind's own rule (diagram.blocks)
+                    computed = rules[b.kind](ins, partial(k_unit, b))
             except UnitError as exc:
                 if b.name not in reported:
                     reported.add(b.name)

@@ -10,6 +10,7 @@ from dataclasses import replace
 
 import yaml
 
+from .blocks import block_type
 from .curves import basis_of
 from .model import Block, Diagram, NonlinearWeights
 
@@ -22,9 +23,10 @@ def _yaml_number(x: float) -> float | int:
 
 def _block_dict(b: Block) -> dict:
     d: dict = {"type": b.kind}
-    if b.kind != "constant":
+    operands = block_type(b.kind).operands
+    if operands != "none":
         terms = [str(t) for t in b.inputs]
-        d["in"] = terms if b.kind in ("sum", "product") else terms[0]
+        d["in"] = terms if operands == "many" else terms[0]
     if b.k is not None:
         d["k"] = _yaml_number(b.k.evaluate({})) if b.k.is_constant else str(b.k)
     if b.kind == "integrator" and b.init not in (None, 0.0):
