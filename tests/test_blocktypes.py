@@ -130,3 +130,13 @@ def test_a_registered_kind_in_a_loop_agrees_with_the_continuous_chart(square):
     assert np.linalg.norm(y_d - y_c) / np.linalg.norm(y_c) <= 0.02
     model = linearize(diagram, {"x": 0.4})
     assert model.A[0, 0] == pytest.approx(-2 * 1.5 * 0.4, rel=1e-12)
+
+
+def test_a_registered_kind_may_not_lower_onto_a_state(square):
+    """Loop analysis reads the chart as written: a kind lowered onto an integrator would be a false algebraic
+    loop there, so lowering is to the kinds without a state only."""
+    angle = BlockType("angle", "integral of x", ("in",), lower=lambda b: replace(b, kind="integrator", init=0.0))
+    with registered(angle):
+        diagram = diagram_from_text(chart("y: {type: angle, in: u}"))
+        with pytest.raises(ValueError, match="one of sum, gain, constant, function, product"):
+            compile_diagram(diagram)

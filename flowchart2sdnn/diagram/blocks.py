@@ -25,8 +25,8 @@ from types import MappingProxyType
 from .model import Block, Diagram
 from .units import Unit, parse_unit
 
-__all__ = ["BlockType", "BLOCK_KINDS", "CORE_KINDS", "block_type", "block_types", "register_block_type",
-           "unregister_block_type", "registered", "core_block", "core_diagram"]
+__all__ = ["BlockType", "BLOCK_KINDS", "CORE_KINDS", "block_type", "block_types", "cuts", "register_block_type",
+           "unregister_block_type", "registered", "core_block", "core_diagram", "LOWER_TO"]
 
 #: a unit rule: (operand units, a thunk giving the unit of `k`, DIMENSIONLESS without k) -> the output's unit;
 #: None when it cannot be told yet. The thunk may raise UnitError (lint reports it once).
@@ -47,7 +47,11 @@ class BlockType:
     rank: its place among the kinds when loop analysis orders blocks that are otherwise alike.
     unit: its unit rule (UnitRule); None when lint has a rule of its own for the kind (sum, function) or none.
     label: the text under its name in the drawing.
-    lower: for a kind the compiler does not know: the core block it means (same name and input signals).
+    cut: which edges of the chart graph carry no direct feedthrough (analysis.graph): "in" for a state
+        (the edge into an integrator), "out" for held samples (the edges out of a delay), "" for none.
+    lower: for a kind the compiler does not know: the core block it means (same name and input signals), one
+        of LOWER_TO. A kind with a state of its own (integrator, delay, learned curve) is core: loop analysis
+        and lint read the chart as written.
     """
 
     kind: str
@@ -60,6 +64,7 @@ class BlockType:
     unit: UnitRule | None = None
     min_operands: int = 1
     too_few: str = ""
+    cut: str = ""
     lower: Callable[[Block], Block] | None = None
 
     def __post_init__(self) -> None:
@@ -67,6 +72,8 @@ class BlockType:
             raise ValueError(f"operands must be 'none', 'one' or 'many', not {self.operands!r}")
         if self.k not in ("none", "required", "optional"):
             raise ValueError(f"k must be 'none', 'required' or 'optional', not {self.k!r}")
+        if self.cut not in ("", "in", "out"):
+            raise ValueError(f"cut must be '', 'in' or 'out', not {self.cut!r}")
         wanted = (("in",) if self.operands != "none" else ()) + (("k",) if self.k != "none" else ())
         missing = [key for key in wanted if key not in self.keys]
         if missing:
@@ -96,9 +103,9 @@ _CORE = (
     BlockType("sum", "sum_i sign_i x_i", ("in",), "many", rank=2),
     BlockType("gain", "k x", ("in", "k"), label=_k_label, k="required", rank=3, unit=_gain_unit),
     BlockType("integrator", "state s, ds/dt = x", ("in", "init", "measured_by"), label=lambda b: "integrator ∫",
-              rank=7, unit=lambda ins, k: ins[0] * _SECOND if ins[0] is not None else None),
+              rank=7, cut="in", unit=lambda ins, k: ins[0] * _SECOND if ins[0] is not None else None),
     BlockType("delay", "x, n samples earlier", ("in", "n"), label=lambda b: f"delay {b.n or 1}", rank=6,
-              unit=lambda ins, k: ins[0]),
+              cut="out", unit=lambda ins, k: ins[0]),
     BlockType("constant", "k", ("k",), "none", label=_k_label, k="required", rank=1, unit=lambda ins, k: k()),
     BlockType("nonlinear", "sum_i v_i tanh(a_i x + b_i) + c x",
               ("in", "neurons", "basis", "linear", "span", "bias", "init_range", "fixed", "weights"),
@@ -113,9 +120,18 @@ _CORE = (
 _LOWERED: tuple[BlockType, ...] = ()
 #: the kinds the compiler, the network and the continuous oracle implement
 CORE_KINDS = tuple(t.kind for t in _CORE)
+#: the core kinds a registered kind may lower to: those without a state, so that the chart as written has the
+#: feedthrough of the chart compiled
+LOWER_TO = ("sum", "gain", "constant", "function", "product")
 #: the kinds of a chart as shipped; block_types() also lists the ones registered at run time
 BLOCK_KINDS = CORE_KINDS + tuple(t.kind for t in _LOWERED)
 _REGISTRY: dict[str, BlockType] = {t.kind: t for t in _CORE}
+
+
+def cuts(kind: str) -> str:
+    """The `cut` of a kind ("" for a chart input or a kind nobody registered)."""
+    bt = _REGISTRY.get(kind)
+    return bt.cut if bt is not None else ""
 
 
 def block_types() -> MappingProxyType:
@@ -159,9 +175,9 @@ def core_block(b: Block) -> Block:
         return b
     lowered = block_type(b.kind).lower(b)
     # loop analysis and lint read the chart as written: the lowered block must use the same signals
-    if lowered.kind not in CORE_KINDS or lowered.name != b.name or set(lowered.signals_in) != set(b.signals_in):
+    if lowered.kind not in LOWER_TO or lowered.name != b.name or set(lowered.signals_in) != set(b.signals_in):
         raise ValueError(f"block type '{b.kind}' lowers '{b.name}' to a {lowered.kind} block with another name or "
-                         "other signals; it must keep both and give a core kind")
+                         f"other signals; it must keep both and give one of {', '.join(LOWER_TO)}")
     return lowered
 
 
