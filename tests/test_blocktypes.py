@@ -34,7 +34,7 @@ from flowchart2sdnn.network.runtime import CompiledNetwork
 from flowchart2sdnn.simulate.continuous import simulate_continuous
 
 
-def _square_unit(ins, k):
+def _square_unit(b, ins, k, complain):
     if ins[0] is None:
         return None
     ku = k()

@@ -20,18 +20,22 @@ from __future__ import annotations
 from collections.abc import Callable, Iterator, Sequence
 from contextlib import contextmanager
 from dataclasses import dataclass, replace
+from fractions import Fraction
 from types import MappingProxyType
 
 from .model import Block, Diagram
-from .units import Unit, parse_unit
+from .units import DIMENSIONLESS, Unit, parse_unit
 
 __all__ = ["BlockType", "BLOCK_KINDS", "CORE_KINDS", "block_type", "block_types", "cuts", "register_block_type",
-           "unregister_block_type", "registered", "core_block", "core_diagram", "LOWER_TO"]
+           "unregister_block_type", "registered", "core_block", "core_diagram", "LOWER_TO", "UNIT_FUNCTIONS"]
 
-#: a unit rule: (operand units, a thunk giving the unit of `k`, DIMENSIONLESS without k) -> the output's unit;
-#: None when it cannot be told yet. The thunk may raise UnitError (lint reports it once).
-UnitRule = Callable[[Sequence[Unit | None], Callable[[], Unit | None]], Unit | None]
-
+#: a unit rule: (the block, its operand units, a thunk giving the unit of `k` (DIMENSIONLESS without k), a
+#: complaint (code, severity, message)) -> the output's unit, None when it cannot be told yet. The thunk may
+#: raise UnitError; lint reports that, and a complaint, once per block.
+UnitRule = Callable[[Block, Sequence[Unit | None], Callable[[], Unit | None], Callable[[str, str, str], None]],
+                    Unit | None]
+#: functions whose output has a unit: the argument's to this power (the others need a dimensionless argument)
+UNIT_FUNCTIONS = {"sqrt": Fraction(1, 2), "abs": 1, "square": 2, "signed_square": 2}
 _SECOND = parse_unit("s")
 
 
@@ -45,7 +49,7 @@ class BlockType:
         fewest signals a list may hold, with `too_few` the message when it holds fewer.
     k: "none", "required" or "optional" (an expression of parameters, 1 when absent).
     rank: its place among the kinds when loop analysis orders blocks that are otherwise alike.
-    unit: its unit rule (UnitRule); None when lint has a rule of its own for the kind (sum, function) or none.
+    unit: its unit rule (UnitRule); None: lint tells no unit (a learned curve's output unit is declared).
     label: the text under its name in the drawing.
     cut: which edges of the chart graph carry no direct feedthrough (analysis.graph): "in" for a state
         (the edge into an integrator), "out" for held samples (the edges out of a delay), "" for none.
@@ -84,12 +88,30 @@ def _k_label(b: Block) -> str:
     return f"{b.kind} k = {b.k}" if b.k is not None else b.kind
 
 
-def _gain_unit(ins, k):
+def _sum_unit(b, ins, k, complain):
+    known = [(t.signal, u) for t, u in zip(b.inputs, ins, strict=True) if u is not None]
+    for sig, u in known[1:]:
+        if u != known[0][1]:
+            complain("LINT005", "error", f"sum of unlike units: '{known[0][0]}' is {known[0][1]} but '{sig}' is {u}")
+    return known[0][1] if known and len(known) == len(ins) else None
+
+
+def _function_unit(b, ins, k, complain):
+    ku = k()
+    arg = ins[0] * ku if ins[0] is not None and ku is not None else None
+    if b.f in UNIT_FUNCTIONS:  # these carry the argument's unit through
+        return None if arg is None else arg ** UNIT_FUNCTIONS[b.f]
+    if arg is not None and not arg.is_dimensionless and b.f != "sign_smooth":
+        complain("LINT009", "warning", f"argument of {b.f} has unit {arg}, expected dimensionless")
+    return DIMENSIONLESS
+
+
+def _gain_unit(b, ins, k, complain):
     ku = k() if ins[0] is not None else None
     return ins[0] * ku if ku is not None else None
 
 
-def _product_unit(ins, k):
+def _product_unit(b, ins, k, complain):
     if any(u is None for u in ins):
         return None
     out = k()
@@ -100,18 +122,20 @@ def _product_unit(ins, k):
 
 
 _CORE = (
-    BlockType("sum", "sum_i sign_i x_i", ("in",), "many", rank=2),
+    BlockType("sum", "sum_i sign_i x_i", ("in",), "many", rank=2, unit=_sum_unit),
     BlockType("gain", "k x", ("in", "k"), label=_k_label, k="required", rank=3, unit=_gain_unit),
     BlockType("integrator", "state s, ds/dt = x", ("in", "init", "measured_by"), label=lambda b: "integrator ∫",
-              rank=7, cut="in", unit=lambda ins, k: ins[0] * _SECOND if ins[0] is not None else None),
+              rank=7, cut="in", unit=lambda b, ins, k, complain: ins[0] * _SECOND if ins[0] is not None else None),
     BlockType("delay", "x, n samples earlier", ("in", "n"), label=lambda b: f"delay {b.n or 1}", rank=6,
-              cut="out", unit=lambda ins, k: ins[0]),
-    BlockType("constant", "k", ("k",), "none", label=_k_label, k="required", rank=1, unit=lambda ins, k: k()),
+              cut="out", unit=lambda b, ins, k, complain: ins[0]),
+    BlockType("constant", "k", ("k",), "none", label=_k_label, k="required", rank=1,
+              unit=lambda b, ins, k, complain: k()),
     BlockType("nonlinear", "sum_i v_i tanh(a_i x + b_i) + c x",
               ("in", "neurons", "basis", "linear", "span", "bias", "init_range", "fixed", "weights"),
               label=lambda b: f"learned, {b.neurons} tanh", rank=5),
     BlockType("function", "f(k x)", ("in", "f", "k", "eps"),
-              label=lambda b: f"{b.f}" + (f" (k = {b.k})" if b.k is not None else ""), k="optional", rank=4),
+              label=lambda b: f"{b.f}" + (f" (k = {b.k})" if b.k is not None else ""), k="optional", rank=4,
+              unit=_function_unit),
     BlockType("product", "k prod_i sign_i x_i", ("in", "k"), "many", label=_k_label, k="optional", rank=8,
               unit=_product_unit, min_operands=2,
               too_few="a product needs at least two signals in 'in'; use a gain block to scale one signal"),
