@@ -9,6 +9,7 @@ RK4 simulation of the chart (simulate.continuous shares no code with the compile
 from __future__ import annotations
 
 from dataclasses import replace
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -75,9 +76,9 @@ def test_the_core_kinds_are_registered_and_protected():
     with pytest.raises(ValueError, match="core block type"):
         unregister_block_type("sum")
     with pytest.raises(ValueError, match="needs `lower`"):
-        register_block_type(BlockType("cube", "x^3", ("in",)))
+        register_block_type(BlockType("toy_cube", "x^3", ("in",)))
     with pytest.raises(ValueError, match="keys must name k"):
-        BlockType("cube", "k x^3", ("in",), k="required")
+        BlockType("toy_cube", "k x^3", ("in",), k="required")
 
 
 def test_a_registered_kind_validates_and_is_unknown_before_and_after(square):
@@ -140,3 +141,10 @@ def test_a_registered_kind_may_not_lower_onto_a_state(square):
         diagram = diagram_from_text(chart("y: {type: angle, in: u}"))
         with pytest.raises(ValueError, match="one of sum, gain, constant, function, product"):
             compile_diagram(diagram)
+
+
+def test_every_shipped_kind_has_a_row_in_the_chart_format_guide():
+    from flowchart2sdnn.diagram.blocks import BLOCK_KINDS
+
+    text = (Path(__file__).resolve().parents[1] / "docs" / "guide" / "chart-format.md").read_text(encoding="utf-8")
+    assert [k for k in BLOCK_KINDS if f"| `{k}` |" not in text] == []
