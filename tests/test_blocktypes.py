@@ -79,6 +79,24 @@ def test_the_core_kinds_are_registered_and_protected():
         register_block_type(BlockType("toy_cube", "x^3", ("in",)))
     with pytest.raises(ValueError, match="keys must name k"):
         BlockType("toy_cube", "k x^3", ("in",), k="required")
+    with pytest.raises(ValueError, match="no core kind takes power"):
+        register_block_type(BlockType("toy_cube", "x^p", ("in", "power"), lower=lambda b: b))
+    with pytest.raises(ValueError, match="cuts no edge"):
+        register_block_type(BlockType("toy_cube", "x^3", ("in",), cut="in", lower=lambda b: b))
+    assert "toy_cube" not in block_types()
+
+
+def test_a_registered_kind_reads_the_keys_it_names():
+    """`eps` is read (and checked, and written back) for any kind that names it, not only for `function`."""
+    soft = BlockType("soft_sign", "tanh(k x / eps)", ("in", "k", "eps"), k="optional",
+                     lower=lambda b: replace(b, kind="function", f="sign_smooth"))
+    with registered(soft):
+        diagram = diagram_from_text(chart("y: {type: soft_sign, in: u, eps: 0.5}"))
+        assert diagram.block("y").eps == 0.5
+        assert "'eps' must be positive" in _messages(chart("y: {type: soft_sign, in: u, eps: -1}"))
+        assert diagram_from_text(dump_diagram(diagram)).block("y").eps == 0.5
+        u = np.linspace(-1, 1, 11)[:, None]
+        np.testing.assert_allclose(simulate_continuous(diagram, u)[:, 0], np.tanh(u[:, 0] / 0.5), rtol=1e-13)
 
 
 def test_a_registered_kind_validates_and_is_unknown_before_and_after(square):

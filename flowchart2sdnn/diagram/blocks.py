@@ -1,16 +1,19 @@
 """The block registry: one :class:`BlockType` record per block kind says what that kind is.
 
-A record holds what the passes ask of a kind: its YAML keys and operand shape (validate, dump), whether `k`
-is required, its unit rule (lint), its rank among the kinds (loop analysis orders layers by it) and its label
+A record holds what the passes ask of a kind: its YAML keys and operand shape (validate reads, and dump writes,
+each key where a kind names it), whether `k` is required, its unit rule (lint), its rank among the kinds (loop
+analysis orders layers by it), which of its edges carry no direct feedthrough (analysis.graph) and its label
 (the drawing). The eight core kinds below are what the compiler and the continuous oracle implement; a new
-kind that means a core block with some fields fixed (a `square` block is a `function` block with `f: square`)
+kind that means a core block without a state (a `square` block k x^2 is a `product` of its input with itself)
 says so in `lower`, and compile, the oracle and linearize see the core block it lowers to
 (:func:`core_diagram`). Nothing else needs to change: see CONTRIBUTING.md, "Add a block type".
 
-What stays special, because the structure of a pass depends on it rather than a per-kind table:
-`integrator` (the state: implicit Euler in the compiler, RK4 state in the oracle, the cut edge of loop
-analysis), `delay` (held samples), `nonlinear` (learned neurons and their free weights) and the extra keys of
-`function` (`f`, `eps`), `integrator` (`init`, `measured_by`), `delay` (`n`) and `nonlinear` (validate.py).
+What stays special, and why. The compiler (compiler.discretize), the oracle (simulate.continuous) and
+linearize (analysis.linearize) sit above this layer, so a record cannot hold their code: each keeps its own
+case per core kind, and a new kind reaches them only through `lower`. The oracle's opcodes in particular are
+its own on purpose: it must share no code with the compiler. `integrator`, `delay` and `nonlinear` are
+structural there (a state, held samples, learned neurons with free weights), and the keys `init`, `n`, `f`
+and the learned curve's keys have their checks in validate.py.
 
 Layer: diagram.
 """
@@ -150,6 +153,8 @@ LOWER_TO = ("sum", "gain", "constant", "function", "product")
 #: the kinds of a chart as shipped; block_types() also lists the ones registered at run time
 BLOCK_KINDS = CORE_KINDS + tuple(t.kind for t in _LOWERED)
 _REGISTRY: dict[str, BlockType] = {t.kind: t for t in _CORE}
+#: the keys validate reads (and dump writes) for any kind that names them
+_READ_KEYS = frozenset(key for t in _CORE for key in t.keys)
 
 
 def cuts(kind: str) -> str:
@@ -173,7 +178,13 @@ def register_block_type(bt: BlockType) -> None:
     if bt.kind in _REGISTRY:
         raise ValueError(f"block type '{bt.kind}' is already registered")
     if bt.lower is None:
-        raise ValueError(f"block type '{bt.kind}' needs `lower`: the core block ({', '.join(CORE_KINDS)}) it means")
+        raise ValueError(f"block type '{bt.kind}' needs `lower`: the core block ({', '.join(LOWER_TO)}) it means")
+    if bt.cut:
+        raise ValueError(f"block type '{bt.kind}' lowers onto a kind without a state: it cuts no edge")
+    unread = [key for key in bt.keys if key not in _READ_KEYS]
+    if unread:
+        raise ValueError(f"block type '{bt.kind}': no core kind takes {', '.join(unread)}; a new key needs a field "
+                         "of Block, its check in validate.py and its line in dump.py")
     _REGISTRY[bt.kind] = bt
 
 

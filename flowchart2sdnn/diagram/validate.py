@@ -370,18 +370,20 @@ class _Validator:
                            "signals in 'in'", path + ("in",), name)
         if bt.k != "none":
             fields["k"] = self.expression(spec, "k", path, name, pnames, required=bt.k == "required")
-        if kind == "function":
+        # the keys beyond `in` and `k`, each read where a kind names it (diagram.blocks)
+        if "f" in bt.keys:
             f = spec.get("f")
             if f not in FUNCTIONS:
                 self.error("CHART004" if "f" in spec else "CHART002",
                            f"'f' must be one of: {', '.join(FUNCTIONS)}; found {_show(f)}", path + ("f",), name,
                            did_you_mean(str(f), FUNCTIONS))
             fields["f"] = f
+        if "eps" in bt.keys:
             eps = self.number(spec, "eps", path, name)
             if eps is not None and eps <= 0:
                 self.error("CHART004", f"'eps' must be positive, found {_show(eps)}", path + ("eps",), name)
             fields["eps"] = eps
-        elif kind == "integrator":
+        if "init" in bt.keys:
             init = spec.get("init", 0.0)
             if init in ("data", ESTIMATE) or (isinstance(init, str) and init in pnames):
                 fields["init"] = init
@@ -391,16 +393,16 @@ class _Validator:
                 self.error("CHART004", "'init' must be a number, 'data', 'estimate' or a parameter's name, found "
                            f"{_show(init)}", path + ("init",), name,
                            did_you_mean(str(init), ["data", ESTIMATE, *pnames]) if isinstance(init, str) else None)
-            if "measured_by" in spec:
-                fields["measured_by"] = self.optional_str(spec, "measured_by", path, name)
-        elif kind == "delay":
+        if "measured_by" in bt.keys and "measured_by" in spec:
+            fields["measured_by"] = self.optional_str(spec, "measured_by", path, name)
+        if "n" in bt.keys:
             n = spec.get("n", 1)
             if not isinstance(n, int) or isinstance(n, bool) or not 1 <= n <= MAX_DELAY:
                 self.error("CHART004", f"'n' must be a whole number of samples from 1 to {MAX_DELAY}, found {_show(n)}",
                            path + ("n",), name)
                 n = 1
             fields["n"] = n
-        elif kind == "nonlinear":
+        if "neurons" in bt.keys:  # a learned curve's keys are read together
             self.nonlinear(spec, path, name, fields)
         return Block(**fields)
 
