@@ -17,6 +17,7 @@ from xml.sax.saxutils import escape
 
 import networkx as nx
 
+from ..diagram.blocks import block_type
 from ..diagram.model import Block, Diagram
 from .graph import chart_graph
 
@@ -26,17 +27,7 @@ _W, _H, _DX, _DY, _M = 150, 46, 70, 26, 30  # box width/height, gaps between col
 
 
 def _label(b: Block) -> str:
-    if b.kind in ("gain", "constant", "product") and b.k is not None:
-        return f"{b.kind} k = {b.k}"
-    if b.kind == "function":
-        return f"{b.f}" + (f" (k = {b.k})" if b.k is not None else "")
-    if b.kind == "nonlinear":
-        return f"learned, {b.neurons} tanh"
-    if b.kind == "delay":
-        return f"delay {b.n or 1}"
-    if b.kind == "integrator":
-        return "integrator ∫"
-    return b.kind
+    return block_type(b.kind).label(b)
 
 
 def _feedback_edges(g: nx.DiGraph, roots: list[str]) -> set[tuple[str, str]]:

@@ -33,6 +33,7 @@ from dataclasses import dataclass, field
 import networkx as nx
 import numpy as np
 
+from ..diagram.blocks import core_diagram
 from ..diagram.model import Block, Diagram
 from ..errors import SdnnError
 
@@ -194,6 +195,7 @@ def linearize(diagram: Diagram, at: Mapping[str, float] | None = None, kink: str
     """
     if kink not in KINKS:
         raise ValueError(f"kink must be one of {KINKS}, not {kink!r}")
+    diagram = core_diagram(diagram)  # a registered kind means the core block it lowers to
     at = dict(at or {})
     states = tuple(b.name for b in diagram.blocks if b.kind == "integrator")
     inputs = diagram.input_names

@@ -19,10 +19,11 @@
 
 from __future__ import annotations
 
-from fractions import Fraction
+from functools import partial
 
 import numpy as np
 
+from ..diagram.blocks import block_types
 from ..diagram.curves import describe_curve
 from ..diagram.model import Block, Diagram
 from ..diagram.units import DIMENSIONLESS, Unit, UnitError, parse_unit, unit_of_expr
@@ -197,21 +198,33 @@ def _units(diagram: Diagram):
                                     f"{unit[name]}", _loc(diagram, diagram.block(name)), name))
         unit.setdefault(name, u)
     reported: set[str] = set()
-    second = parse_unit("s")
-    products: dict[tuple[Unit, Unit], Unit] = {}  # Unit arithmetic is Fraction-heavy; charts repeat a few
-
-    def times(a: Unit, b: Unit) -> Unit:
-        key = (a, b)
-        if key not in products:
-            products[key] = a * b
-        return products[key]
 
     # a block is evaluated again only when one of its inputs got a unit since its last evaluation: the
     # result cannot change otherwise, and re-evaluating every block in every pass is quadratic on long chains
     version: dict[str, int] = dict.fromkeys(unit, 0)
     evaluated: dict[str, int] = {}
     clock = 0
-    gain_units: dict[str, Unit | None] = {}
+    k_units: dict[str, Unit | UnitError | None] = {}
+
+    def k_unit(b: Block) -> Unit | None:
+        if b.k is None:
+            return DIMENSIONLESS
+        if b.name not in k_units:
+            try:
+                k_units[b.name] = _unit_of_k(b.k, pu)
+            except UnitError as exc:  # raised again at each evaluation (reported once, below)
+                k_units[b.name] = exc
+        ku = k_units[b.name]
+        if isinstance(ku, UnitError):
+            raise ku
+        return ku
+
+    def complain(b: Block, code: str, severity: str, message: str) -> None:
+        if b.name not in reported:
+            reported.add(b.name)
+            diags.append(Diagnostic(code, severity, message, _loc(diagram, b), b.name))
+
+    rules = {kind: bt.unit for kind, bt in block_types().items()}
     for _ in range(len(diagram.blocks) + 1):  # fixed point: feedback signals get units from declared ones
         changed = False
         for b in diagram.blocks:
@@ -221,47 +234,11 @@ def _units(diagram: Diagram):
             evaluated[b.name] = clock
             ins = [unit.get(t.signal) for t in b.inputs]
             computed: Unit | None = None
+            rule = rules.get(b.kind)  # the kind's unit rule (diagram.blocks)
+            if rule is None:
+                continue
             try:
-                if b.kind == "sum":
-                    known = [(t.signal, u) for t, u in zip(b.inputs, ins, strict=True) if u is not None]
-                    for sig, u in known[1:]:
-                        if not _same(u, known[0][1]) and b.name not in reported:
-                            reported.add(b.name)
-                            diags.append(Diagnostic(
-                                "LINT005", "error",
-                                f"sum of unlike units: '{known[0][0]}' is {known[0][1]} but '{sig}' is {u}",
-                                _loc(diagram, b), b.name))
-                    computed = known[0][1] if known and len(known) == len(ins) else None
-                elif b.kind == "gain" and ins[0] is not None:
-                    if b.name not in gain_units:
-                        gain_units[b.name] = None  # a UnitError below leaves it unknown, reported once
-                        gain_units[b.name] = _unit_of_k(b.k, pu)
-                    ku = gain_units[b.name]
-                    computed = times(ins[0], ku) if ku is not None else None
-                elif b.kind == "integrator" and ins[0] is not None:
-                    computed = times(ins[0], second)
-                elif b.kind == "delay":
-                    computed = ins[0]
-                elif b.kind == "constant":
-                    computed = _unit_of_k(b.k, pu)
-                elif b.kind == "function":
-                    computed = DIMENSIONLESS
-                    ku = _unit_of_k(b.k, pu) if b.k is not None else DIMENSIONLESS
-                    arg = ins[0] * ku if ins[0] is not None and ku is not None else None
-                    if b.f in _UNIT_FUNCTIONS:  # these carry the argument's unit through
-                        computed = None if arg is None else arg ** _UNIT_FUNCTIONS[b.f]
-                    elif arg is not None and not arg.is_dimensionless and b.name not in reported \
-                            and b.f != "sign_smooth":
-                        reported.add(b.name)
-                        diags.append(Diagnostic("LINT009", "warning",
-                                                f"argument of {b.f} has unit {arg}, expected dimensionless",
-                                                _loc(diagram, b), b.name))
-                elif b.kind == "product" and all(u is not None for u in ins):
-                    ku = _unit_of_k(b.k, pu) if b.k is not None else DIMENSIONLESS
-                    if ku is not None:
-                        computed = ku
-                        for u in ins:
-                            computed = times(computed, u)
+                computed = rule(b, ins, partial(k_unit, b), partial(complain, b))
             except UnitError as exc:
                 if b.name not in reported:
                     reported.add(b.name)
@@ -284,10 +261,6 @@ def _units(diagram: Diagram):
         if not changed:
             break
     return diags
-
-
-#: functions whose output has a unit: the argument's to this power (the others need a dimensionless argument)
-_UNIT_FUNCTIONS = {"sqrt": Fraction(1, 2), "abs": 1, "square": 2, "signed_square": 2}
 
 
 def _unit_of_k(k: Expr, parameter_units: dict) -> Unit | None:

@@ -28,6 +28,7 @@ from dataclasses import dataclass
 
 import networkx as nx
 
+from ..diagram.blocks import block_types
 from ..diagram.model import Diagram
 from .graph import algebraic_graph, chart_graph, delay_free_graph, distances
 
@@ -36,8 +37,11 @@ __all__ = ["DEFAULT_DELAYS", "LoopReport", "analyse_loops", "delay_rule", "find_
 #: the delay rule of a chart without `delays`
 DEFAULT_DELAYS = "torques"
 
-_KIND_RANK = {"input": 0, "constant": 1, "sum": 2, "gain": 3, "function": 4, "nonlinear": 5, "delay": 6,
-              "integrator": 7, "product": 8}
+
+def _kind_rank(kind: str) -> int:
+    """A chart input first, then the kinds in the order of their `rank` (diagram.blocks)."""
+    bt = block_types().get(kind)
+    return 0 if kind == "input" else bt.rank if bt is not None else 9
 
 
 @dataclass(frozen=True)
@@ -128,7 +132,7 @@ def analyse_loops(diagram: Diagram) -> LoopReport:
     far = len(g) + 1
 
     def key(node: str):
-        return (din.get(node, far), -dout.get(node, -1), _KIND_RANK.get(g.nodes[node]["kind"], 9),
+        return (din.get(node, far), -dout.get(node, -1), _kind_rank(g.nodes[node]["kind"]),
                 full.in_degree(node), full.out_degree(node), node)
 
     # speed sums nearest the inputs first: the order is structural, so the choice ignores the YAML order

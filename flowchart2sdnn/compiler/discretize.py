@@ -23,6 +23,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from ..analysis.loops import LoopReport
+from ..diagram.blocks import core_diagram
 from ..diagram.curves import basis_of, basis_weights, learned_roles
 from ..diagram.model import Block, Diagram
 from ..errors import SdnnError
@@ -108,6 +109,7 @@ def output_scale(b: Block) -> float:
 
 
 def discretize(diagram: Diagram, loops: LoopReport, seed: int = 0, substeps: int = 1) -> DiscreteChart:
+    diagram = core_diagram(diagram)  # a registered kind compiles as the core block it lowers to
     blocks = {b.name: b for b in diagram.blocks}
     inputs = set(diagram.input_names)
     delayed = loops.delayed

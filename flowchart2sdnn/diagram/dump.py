@@ -10,6 +10,7 @@ from dataclasses import replace
 
 import yaml
 
+from .blocks import block_type
 from .curves import basis_of
 from .model import Block, Diagram, NonlinearWeights
 
@@ -22,22 +23,24 @@ def _yaml_number(x: float) -> float | int:
 
 def _block_dict(b: Block) -> dict:
     d: dict = {"type": b.kind}
-    if b.kind != "constant":
+    bt = block_type(b.kind)
+    operands, keys = bt.operands, bt.keys  # each key written where a kind names it (diagram.blocks)
+    if operands != "none":
         terms = [str(t) for t in b.inputs]
-        d["in"] = terms if b.kind in ("sum", "product") else terms[0]
+        d["in"] = terms if operands == "many" else terms[0]
     if b.k is not None:
         d["k"] = _yaml_number(b.k.evaluate({})) if b.k.is_constant else str(b.k)
-    if b.kind == "integrator" and b.init not in (None, 0.0):
+    if "init" in keys and b.init not in (None, 0.0):
         d["init"] = b.init if isinstance(b.init, str) else _yaml_number(b.init)
-    if b.kind == "integrator" and b.measured_by is not None:
+    if "measured_by" in keys and b.measured_by is not None:
         d["measured_by"] = b.measured_by
-    if b.kind == "delay" and b.n not in (None, 1):
+    if "n" in keys and b.n not in (None, 1):
         d["n"] = b.n
-    if b.kind == "function":
+    if "f" in keys:
         d["f"] = b.f
-        if b.eps is not None:
-            d["eps"] = _yaml_number(b.eps)
-    if b.kind == "nonlinear":
+    if "eps" in keys and b.eps is not None:
+        d["eps"] = _yaml_number(b.eps)
+    if "neurons" in keys:
         d["neurons"] = b.neurons
         d["basis"] = basis_of(b)
         if b.linear is not None:

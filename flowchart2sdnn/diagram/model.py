@@ -20,7 +20,6 @@ __all__ = [
     "FORMAT_VERSION",
     "MAX_SUBSTEPS",
     "DELAY_RULES",
-    "BLOCK_KINDS",
     "FUNCTIONS",
     "EPS_FUNCTIONS",
     "Signal",
@@ -38,7 +37,6 @@ MAX_SUBSTEPS = 1000
 #: names no block, input or parameter may take (the expression language's pi, `init: data`, the step T)
 RESERVED = frozenset({"pi", "data", "T"})
 DELAY_RULES = ("search", "torques", "midpoint")
-BLOCK_KINDS = ("sum", "gain", "integrator", "delay", "constant", "nonlinear", "function", "product")
 # sat(z) = clip(z, -1, 1); sqrt is signed and regularised within eps of 0 (see FUNCTION_HELP);
 # square is z^2, signed_square z*|z| (a drag that keeps the sign of the speed)
 FUNCTIONS = ("tanh", "sin", "cos", "sign_smooth", "sat", "sqrt", "abs", "exp", "square", "signed_square")

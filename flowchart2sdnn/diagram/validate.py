@@ -15,10 +15,10 @@ from pathlib import Path
 
 from ..errors import Diagnostic, Location, SdnnError, did_you_mean
 from ..expr import ExprError, parse_expr
+from .blocks import block_type, block_types
 from .curves import BASES, BASIS_FUNCTIONS, DEFAULT_BASIS
 from .initestimate import ESTIMATE, expand_estimated_inits
 from .model import (
-    BLOCK_KINDS,
     DELAY_RULES,
     FORMAT_VERSION,
     FUNCTIONS,
@@ -34,7 +34,7 @@ from .model import (
 )
 from .yamlload import LocatedYaml, load_yaml, parse_yaml_text
 
-__all__ = ["load_diagram", "diagram_from_text", "diagram_from_yaml", "TOP_KEYS", "BLOCK_KEYS"]
+__all__ = ["load_diagram", "diagram_from_text", "diagram_from_yaml", "TOP_KEYS"]
 
 NAME_RE = re.compile(r"^[A-Za-z_][A-Za-z0-9_]*$")
 _YAML11_BOOLS = {"yes": True, "on": True, "no": False, "off": False}
@@ -47,16 +47,6 @@ SIGNAL_KEYS = ("unit", "description")
 INPUT_KEYS = (*SIGNAL_KEYS, "intersample", "delay")
 PARAM_KEYS = ("init", "unit", "min", "max", "fixed", "description", "per_record")
 COMMON_BLOCK_KEYS = ("type", "unit", "description")
-BLOCK_KEYS: dict[str, tuple[str, ...]] = {
-    "sum": ("in",),
-    "gain": ("in", "k"),
-    "integrator": ("in", "init", "measured_by"),
-    "delay": ("in", "n"),
-    "constant": ("k",),
-    "nonlinear": ("in", "neurons", "basis", "linear", "span", "bias", "init_range", "fixed", "weights"),
-    "function": ("in", "f", "k", "eps"),
-    "product": ("in", "k"),
-}
 
 
 def load_diagram(path: str | Path) -> Diagram:
@@ -352,15 +342,17 @@ class _Validator:
                        f"found {_kind(spec)}", path, name)
             return None
         kind = spec.get("type")
+        kinds = tuple(block_types())
         if kind is None:
-            self.error("CHART002", f"missing 'type' (one of: {', '.join(BLOCK_KINDS)})", path, name)
+            self.error("CHART002", f"missing 'type' (one of: {', '.join(kinds)})", path, name)
             return None
-        if kind not in BLOCK_KINDS:
-            self.error("CHART006", f"unknown block type {_show(kind)}; expected one of: {', '.join(BLOCK_KINDS)}",
-                       path + ("type",), name, did_you_mean(str(kind), BLOCK_KINDS))
+        if kind not in kinds:
+            self.error("CHART006", f"unknown block type {_show(kind)}; expected one of: {', '.join(kinds)}",
+                       path + ("type",), name, did_you_mean(str(kind), kinds))
             return None
+        bt = block_type(kind)
         article = "an" if kind[0] in "aeiou" else "a"
-        self.unknown_keys(spec, COMMON_BLOCK_KEYS + BLOCK_KEYS[kind], path, f"{article} {kind} block", name)
+        self.unknown_keys(spec, COMMON_BLOCK_KEYS + bt.keys, path, f"{article} {kind} block", name)
         fields: dict = {
             "name": name,
             "kind": kind,
@@ -368,30 +360,30 @@ class _Validator:
             "description": self.optional_str(spec, "description", path, name),
             "location": self.loc(*path),
         }
-        if kind == "constant":
+        if bt.operands == "none":
             if "in" in spec:
-                self.error("CHART003", "a constant block takes no 'in'", path + ("in",), name)
+                self.error("CHART003", f"{article} {kind} block takes no 'in'", path + ("in",), name)
         else:
-            fields["inputs"] = self.terms(spec, path, name, many=kind in ("sum", "product"))
-            if kind == "product" and len(fields["inputs"]) == 1:
-                self.error("CHART004", "a product needs at least two signals in 'in'; use a gain block to scale "
-                           "one signal", path + ("in",), name)
-        if kind in ("gain", "constant"):
-            fields["k"] = self.expression(spec, "k", path, name, pnames, required=True)
-        elif kind in ("function", "product"):
-            fields["k"] = self.expression(spec, "k", path, name, pnames, required=False)
-        if kind == "function":
+            fields["inputs"] = self.terms(spec, path, name, many=bt.operands == "many")
+            if 0 < len(fields["inputs"]) < bt.min_operands:
+                self.error("CHART004", bt.too_few or f"{article} {kind} block needs at least {bt.min_operands} "
+                           "signals in 'in'", path + ("in",), name)
+        if bt.k != "none":
+            fields["k"] = self.expression(spec, "k", path, name, pnames, required=bt.k == "required")
+        # the keys beyond `in` and `k`, each read where a kind names it (diagram.blocks)
+        if "f" in bt.keys:
             f = spec.get("f")
             if f not in FUNCTIONS:
                 self.error("CHART004" if "f" in spec else "CHART002",
                            f"'f' must be one of: {', '.join(FUNCTIONS)}; found {_show(f)}", path + ("f",), name,
                            did_you_mean(str(f), FUNCTIONS))
             fields["f"] = f
+        if "eps" in bt.keys:
             eps = self.number(spec, "eps", path, name)
             if eps is not None and eps <= 0:
                 self.error("CHART004", f"'eps' must be positive, found {_show(eps)}", path + ("eps",), name)
             fields["eps"] = eps
-        elif kind == "integrator":
+        if "init" in bt.keys:
             init = spec.get("init", 0.0)
             if init in ("data", ESTIMATE) or (isinstance(init, str) and init in pnames):
                 fields["init"] = init
@@ -401,16 +393,16 @@ class _Validator:
                 self.error("CHART004", "'init' must be a number, 'data', 'estimate' or a parameter's name, found "
                            f"{_show(init)}", path + ("init",), name,
                            did_you_mean(str(init), ["data", ESTIMATE, *pnames]) if isinstance(init, str) else None)
-            if "measured_by" in spec:
-                fields["measured_by"] = self.optional_str(spec, "measured_by", path, name)
-        elif kind == "delay":
+        if "measured_by" in bt.keys and "measured_by" in spec:
+            fields["measured_by"] = self.optional_str(spec, "measured_by", path, name)
+        if "n" in bt.keys:
             n = spec.get("n", 1)
             if not isinstance(n, int) or isinstance(n, bool) or not 1 <= n <= MAX_DELAY:
                 self.error("CHART004", f"'n' must be a whole number of samples from 1 to {MAX_DELAY}, found {_show(n)}",
                            path + ("n",), name)
                 n = 1
             fields["n"] = n
-        elif kind == "nonlinear":
+        if "neurons" in bt.keys:  # a learned curve's keys are read together
             self.nonlinear(spec, path, name, fields)
         return Block(**fields)
 

@@ -38,6 +38,7 @@ import networkx as nx
 import numpy as np
 from numba import njit
 
+from ..diagram.blocks import core_diagram
 from ..diagram.model import Block, Diagram, NonlinearWeights
 from .functions import FUNCTION_CODES as _FUNCTION
 from .functions import chart_function
@@ -324,6 +325,7 @@ def _topological(graph: nx.DiGraph, nodes) -> list[str]:
 
 def _compile(diagram: Diagram, env: Mapping[str, float], init: Mapping[str, float] | None,
              nonlinear: Mapping[str, NonlinearWeights] | None) -> _Program:
+    diagram = core_diagram(diagram)  # a registered kind means the core block it lowers to
     names = diagram.input_names + diagram.block_names
     index = {name: i for i, name in enumerate(names)}
     if len(index) != len(names):
