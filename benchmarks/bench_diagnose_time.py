@@ -86,7 +86,13 @@ def main() -> None:
     ap.add_argument("--seed", type=int, action="append")
     ap.add_argument("--workers", type=int, default=1)
     ap.add_argument("--marks", action="store_true", help="print every progress message with its time")
+    ap.add_argument("--no-cutoff", action="store_true",
+                    help="the baseline: brief refits run their whole --refit-iter budget (no cut-off)")
     args = ap.parse_args()
+    if args.no_cutoff:
+        from flowchart2sdnn.diagnose import fitting
+
+        fitting.behind = lambda target, max_iter: (lambda it, cost: None)
     seeds = args.seed or [int(s) for s in np.random.SeedSequence().generate_state(args.n)]
     print(f"# seeds drawn: {seeds}", flush=True)
     for seed in seeds:
