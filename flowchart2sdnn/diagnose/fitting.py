@@ -1,6 +1,6 @@
 """A chart fitted for diagnosis: the settings, the :class:`Fitted` record (training cost, validation error,
-information criteria), fits with a growing horizon; what a fit says about itself (its residual analysis among it) is
-:mod:`.fitstate`'s, re-exported here.
+information criteria) and fits with a growing horizon. What a fit says about itself, its residual analysis
+among it, is :mod:`.fitstate`'s, re-exported here.
 
 Layer: diagnose (below it: identify and everything under it).
 """
