@@ -182,7 +182,7 @@ _BOOK: tuple[Rule, ...] = (
     _r("far_above_noise", 5.0, "ratio of RMS", "A complete chart at its minimum ends within about 4x the noise "
        "(the discretization floor included); 5x means an effect is missing or the fit is in a local minimum.",
        "identify.settings.FAR_ABOVE_NOISE", "identify.offline.run (the far-above-noise warning)",
-       "diagnose.loop.SECOND_LOOK", flags=("diagnose --second-look",)),
+       "diagnose.choice.SECOND_LOOK", flags=("diagnose --second-look",)),
     _r("online_window", 25000, "samples", "The paper's quasi-online window Q.",
        "identify.settings.IdentifySettings.window", flags=("identify --window",),
        note="equal to online_average by coincidence"),

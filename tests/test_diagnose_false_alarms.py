@@ -141,7 +141,7 @@ def test_the_control_gets_the_growing_horizon_when_a_candidate_did(monkeypatch):
     and it wins when it reaches the lower cost. The fits are stand-ins: their costs are the oracle."""
     from types import SimpleNamespace
 
-    from flowchart2sdnn.diagnose import loop
+    from flowchart2sdnn.diagnose import refits
 
     grown_calls = []
     ident = SimpleNamespace(status="converged")
@@ -153,21 +153,21 @@ def test_the_control_gets_the_growing_horizon_when_a_candidate_did(monkeypatch):
         grown_calls.append((diagram, start))
         return Fitted(ident, 0.5, 100, 5, {}, start)
 
-    monkeypatch.setattr(loop, "fit_chart", fake_fit_chart)
-    monkeypatch.setattr(loop, "fit_growing", fake_fit_growing)
+    monkeypatch.setattr(refits, "fit_chart", fake_fit_chart)
+    monkeypatch.setattr(refits, "fit_growing", fake_fit_growing)
     current = Fitted(SimpleNamespace(status="converged", diagram="current chart"), 2.0, 100, 5, {})
     settings = DiagnoseSettings()
-    plain = loop._control(current, "chart as given", [], [], settings, 0, [], None)
+    plain = refits.control_fit(current, "chart as given", [], [], settings, 0, [], None)
     assert grown_calls == [] and plain.cost == 1.0
-    grown = loop._control(current, "chart as given", [], [], settings, 0, [], None, horizon=True)
+    grown = refits.control_fit(current, "chart as given", [], [], settings, 0, [], None, horizon=True)
     assert grown_calls == [("chart as given", "control_horizon")]
     assert grown.cost == 0.5 and grown.start == "control_horizon"
     # horizon 0 (off) keeps it off for the control as for the candidates
     grown_calls.clear()
-    loop._control(current, "chart as given", [], [], DiagnoseSettings(horizon=0), 0, [], None, horizon=True)
+    refits.control_fit(current, "chart as given", [], [], DiagnoseSettings(horizon=0), 0, [], None, horizon=True)
     assert grown_calls == []
     # without such a candidate the control's refit from the chart as given grows under the neutral candidates'
     # rule: when it is unpredictable (fitting.unpredictable), and only from the chart as given
-    monkeypatch.setattr(loop, "unpredictable", lambda fitted, train, settings: True)
-    chaotic = loop._control(current, "chart as given", [], [], settings, 0, [], None)
+    monkeypatch.setattr(refits, "unpredictable", lambda fitted, train, settings: True)
+    chaotic = refits.control_fit(current, "chart as given", [], [], settings, 0, [], None)
     assert grown_calls == [("chart as given", "control_horizon")] and chaotic.start == "control_horizon"

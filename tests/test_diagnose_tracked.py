@@ -117,7 +117,7 @@ def test_a_fit_at_the_noise_floor_scores_the_whole_record():
 def test_the_tracked_parts_picks_join_the_refit_set_once_as_their_whole_record_scores():
     from types import SimpleNamespace
 
-    from flowchart2sdnn.diagnose.loop import _union
+    from flowchart2sdnn.diagnose.choice import union_picks
     from flowchart2sdnn.diagnose.score import Baseline, Score, Screen
 
     def cand(effect, at, label):
@@ -131,5 +131,5 @@ def test_the_tracked_parts_picks_join_the_refit_set_once_as_their_whole_record_s
     scr = Screen(Baseline(1.0, 0.0, 1, 10, 1, 0.1), tuple(whole))
     best = [whole[0], whole[1]]
     picks = [score(cog8, 50.0), score(cog6, 40.0)]  # scored on the tracked part: already-present cog6 not twice
-    out = _union(best, picks, scr)
+    out = union_picks(best, picks, scr)
     assert out == [whole[0], whole[1], whole[2]]  # cog8 joins as its whole-record Score (the report's ranking)

@@ -259,6 +259,22 @@ def scaled_mu(A, mu0, tau, mu_max):
 
 
 # ------------------------------------------------------------------------------------------ window mode
+@numba.njit(cache=True, inline="always")
+def _record_outputs(cost, tq, q, slot, output_index, targets, a, s, dxdu, e_out, c_out, J_out, with_sens):
+    """Each output's error at sample `tq` (the network's outputs in ring slot `slot`) into row `q` of the replay,
+    with `with_sens` its Jacobian row too; `cost` plus the squared errors, added in output order."""
+    for o in range(output_index.shape[0]):
+        r = ix(output_index[ix(o)])
+        err = targets[ix(tq), ix(o)] - a[slot, r]
+        e_out[ix(q), ix(o)] = err
+        cost += err * err
+        if with_sens:
+            c_out[ix(q), ix(o)] = err
+            for p in range(dxdu.shape[0]):
+                J_out[ix(q), ix(o), ix(p)] = s[slot, r, ix(p)] * dxdu[ix(p)]
+    return cost
+
+
 @numba.njit(cache=True)
 def _replay(inputs, targets, net, conn, dval, dxdu, a, s, s_blk, with_sens, win_state, win_time, its, states,
             e_out, c_out, J_out, limit, slot_of, dn, dn2):
@@ -293,15 +309,8 @@ def _replay(inputs, targets, net, conn, dval, dxdu, a, s, s_blk, with_sens, win_
             else:
                 simulate(tq, inputs, net, conn, a, slot_of)
             slot = ix(tq % ring)
-            for o in range(output_index.shape[0]):
-                r = ix(output_index[ix(o)])
-                err = targets[ix(tq), ix(o)] - a[slot, r]
-                e_out[ix(q), ix(o)] = err
-                cost += err * err
-                if with_sens:
-                    c_out[ix(q), ix(o)] = err
-                    for p in range(dxdu.shape[0]):
-                        J_out[ix(q), ix(o), ix(p)] = s[slot, r, ix(p)] * dxdu[ix(p)]
+            cost = _record_outputs(cost, tq, q, slot, output_index, targets, a, s, dxdu, e_out, c_out, J_out,
+                                   with_sens)
             if not with_sens and (not 0.5 * cost <= limit or cost > 1e300):
                 return math.inf
             prev = tq
@@ -346,15 +355,8 @@ def _replay_substeps(inputs, targets, net, conn, dval, dxdu, a, s, s_blk, with_s
                 for step in range(first, first + n_sub):
                     simulate(step, inputs, net, conn, a, slot_of)
             slot = ix((first + n_sub - 1) % ring)
-            for o in range(output_index.shape[0]):
-                r = ix(output_index[ix(o)])
-                err = targets[ix(tq), ix(o)] - a[slot, r]
-                e_out[ix(q), ix(o)] = err
-                cost += err * err
-                if with_sens:
-                    c_out[ix(q), ix(o)] = err
-                    for p in range(dxdu.shape[0]):
-                        J_out[ix(q), ix(o), ix(p)] = s[slot, r, ix(p)] * dxdu[ix(p)]
+            cost = _record_outputs(cost, tq, q, slot, output_index, targets, a, s, dxdu, e_out, c_out, J_out,
+                                   with_sens)
             if not with_sens and (not 0.5 * cost <= limit or cost > 1e300):
                 return math.inf
             prev = tq
