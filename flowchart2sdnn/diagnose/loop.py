@@ -185,8 +185,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                            "score_rows_added": [s.candidate.title() for s in prefix_best[1]] if prefix_best else []}
             refits: list[tuple[Score, Fitted]] = []
             for s, fitted, seconds in brief_refits(best, nominal_chart, train, records, settings, extra_dof, accepted,
-                                              executor, lambda text, r=r: say(f"round {r}: {text}", None),
-                                              current.cost):
+                                              executor, lambda text, r=r: say(f"round {r}: {text}", None)):
                 timing["refit"].append(seconds)
                 if was_interrupted(fitted):
                     raise KeyboardInterrupt
@@ -196,8 +195,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             if more:
                 say(f"round {r}: no refit near the noise; refitting {len(more)} more places", None)
                 for s, fitted, seconds in brief_refits(more, nominal_chart, train, records, settings, extra_dof,
-                                                  accepted, executor, lambda text, r=r: say(f"round {r}: {text}", None),
-                                                  current.cost):
+                                                  accepted, executor, lambda text, r=r: say(f"round {r}: {text}", None)):
                     timing["refit"].append(seconds)
                     if was_interrupted(fitted):
                         raise KeyboardInterrupt
