@@ -41,6 +41,7 @@ from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify import with_floor_bias
 from ..strictjson import finite_or_none
+from ..threads import one_blas_thread
 from .choice import (
     SECOND_LOOK,
     candidates,
@@ -105,6 +106,7 @@ def _split(train: list[Dataset], validation: Sequence[Dataset], split: float | N
     return [train.slice(0, n)], [(train, n)], split
 
 
+@one_blas_thread
 def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: Sequence[Dataset] = (),
              settings: DiagnoseSettings | None = None, effects: Sequence[Effect] | None = None,
              progress: Progress | None = None, executor=None) -> Diagnosis:

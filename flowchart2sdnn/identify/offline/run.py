@@ -30,6 +30,7 @@ from ...diagram.model import Diagram
 from ...errors import SdnnError
 from ...fit.lm import CONVERGED_STATUSES, CRAWL_DETAIL
 from ...notices import Notice, messages
+from ...threads import one_blas_thread
 from ..assess.evidence import (
     assess,
     no_excitation_message,
@@ -74,6 +75,7 @@ __all__ = ["IdentifySettings", "Identification", "identify", "with_floor_bias"]
 ONLINE_COST = "mean window cost over the last K steps of each quasi-online run"
 
 
+@one_blas_thread
 @np.errstate(all="ignore")  # a diverging trial is expected and handled: no RuntimeWarnings on stderr
 def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: Dataset | None = None,
              settings: IdentifySettings | None = None,
