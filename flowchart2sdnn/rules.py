@@ -310,6 +310,10 @@ _BOOK: tuple[Rule, ...] = (
     _r("rcond", 1e-12, "relative singular value", "The score test's least squares treat smaller singular values "
        "as zero.", "diagnose.score.RCOND",
        note="equal to lm_min_rel_step, cost_rounding, initstate_min_rel_cost_change by coincidence"),
+    _r("noise_lag_window", 1 / 30, "fraction of a record", "The score test's noise spectrum: the residual's "
+       "covariances up to 1/30 of the record (1 s of 30 s), far past a sensor's or a speed estimate's memory, "
+       "averaged over about 30 windows so the variance estimate itself is steady.",
+       "diagnose.noise.NOISE_LAG_WINDOW"),
     _r("neutral_roundoff", 1e-8, "fraction of the largest residual", "A chart holding every neutral patch is "
        "neutral when it moves the residual by no more than float round-off over a long run (1e-11 seen on 10^5 "
        "steps), far below any sensor's resolution.", "diagnose.score.NEUTRAL_ROUNDOFF",

@@ -30,10 +30,13 @@ outputs or the others' sensitivities), so one RTRL pass gives all their columns;
 small eigenproblem on its rows and columns of one Gram matrix. A candidate that is not neutral needs its own
 pass: first the cost of each of its options by simulation, then the full score for the ``top_options`` best.
 
-Under the hypothesis that the chart lacks nothing and the residual is white with variance sigma^2,
-``2 * score / sigma^2`` is approximately chi-square with ``dof`` degrees of freedom (the rank the candidate
-adds, plus one for a scanned discrete choice); its p-value guides significance, but a residual that is not
-white (discretisation error, a missing effect elsewhere) inflates it, so acceptance is decided by refits.
+Significance: under the hypothesis that the chart lacks nothing and the residual is white with variance
+sigma^2, ``2 * score / sigma^2`` would be chi-square with ``dof`` degrees of freedom (the rank the candidate
+adds, plus one for a scanned discrete choice). A fitted chart's residual is not white, and on long records that
+statistic calls everything significant; the statistic and p-value reported are instead read against the
+variance of the score under the residual's own noise spectrum (:mod:`.noise`: a chi-square score test for a
+neutral candidate, a one-sided z test of the gain for one that changes the model). The p-value picks the places to
+refit; acceptance is decided by the refits.
 """
 
 from __future__ import annotations
@@ -51,6 +54,7 @@ from ..diagram.curves import weight_names
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify import Problem, build_problem
+from .noise import Layout, gain_test, score_test
 from .scored import Baseline, Candidate, Score, Screen
 
 __all__ = ["RCOND", "Candidate", "Baseline", "Score", "Screen", "gauss_newton_decrease", "new_quantities", "screened",
@@ -152,7 +156,42 @@ def baseline_of(problem: Problem) -> tuple[Baseline, np.ndarray, np.ndarray]:
     cost = 0.5 * float(e @ e)
     dec, rank = _decrease(*_gram(J, e), sign=_bound_sign(problem))
     sigma2 = 2 * cost / max(1, e.size - rank)
-    return Baseline(cost, dec, rank, e.size, J.shape[1], sigma2), e, J
+    layout = Layout(tuple(len(s.targets) for s in problem.segments), problem.targets.shape[1])
+    return Baseline(cost, dec, rank, e.size, J.shape[1], sigma2, layout, _after_step(J, e),
+                    tuple(problem.names)), e, J
+
+
+def _after_step(J: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """The residual after the full (unbounded) Gauss-Newton step: e with its projection on J's columns taken
+    out (directions below RCOND dropped, as in the score)."""
+    norms = np.linalg.norm(J, axis=0)
+    norms[norms == 0] = 1.0
+    Js = J / norms
+    w, V = eigh(Js.T @ Js, check_finite=False)
+    if not w.size or not w[-1] > 0:
+        return e
+    keep = w > RCOND * w[-1]
+    return e - Js @ (V[:, keep] @ ((V[:, keep].T @ (Js.T @ e)) / w[keep]))
+
+
+def _neutral_significance(base: Baseline, Jo: np.ndarray, Jn: np.ndarray, e: np.ndarray,
+                          coupling: np.ndarray | None = None) -> tuple[float, float]:
+    """(T², p) of a neutral candidate's new columns `Jn` beyond the current ones `Jo` (both column-normalised;
+    `coupling` = Jo⁺Jn when known) under the residual's noise (diagnose.noise.score_test)."""
+    if coupling is None:
+        coupling = np.linalg.lstsq(Jo, Jn, rcond=None)[0] if Jo.shape[1] else np.zeros((0, Jn.shape[1]))
+    stat, _, p = score_test(base.layout, Jn - Jo @ coupling, e, base.e_hat)
+    return stat, p
+
+
+def _scanned_significance(base: Baseline, e: np.ndarray, J: np.ndarray) -> tuple[float, float]:
+    """(t, p) of a candidate that changes the model at once: its per-row gain over the current chart, each after
+    its full Gauss-Newton step, under the residual's noise (diagnose.noise.gain_test)."""
+    if e.shape != base.e_hat.shape:
+        return math.nan, math.nan
+    e_hat = _after_step(J, e)
+    gain = 0.5 * (float(base.e_hat @ base.e_hat) - float(e_hat @ e_hat))
+    return gain_test(base.layout, gain, e_hat, base.e_hat - e_hat)
 
 
 def _bound_sign(problem: Problem) -> np.ndarray:
@@ -176,6 +215,15 @@ def _score_from(c: Candidate, e: np.ndarray, J: np.ndarray, base: Baseline, prob
     score = base.gn_cost - predicted
     dof = max(rank - base.rank, 0) + c.effect.extra_dof
     stat, p = _significance(score, dof, base)
+    if base.layout is not None and c.neutral:
+        index = {n: i for i, n in enumerate(problem.names)}
+        old = [index[n] for n in base.names if n in index]
+        new = [i for i, n in enumerate(problem.names) if n not in set(base.names)]
+        norms = np.linalg.norm(J, axis=0)
+        norms[norms == 0] = 1.0
+        stat, p = _neutral_significance(base, J[:, old] / norms[old], J[:, new] / norms[new], e)
+    elif base.layout is not None:
+        stat, p = _scanned_significance(base, e, J)
     return Score(c, score, cost, predicted, dof, stat, p)
 
 
@@ -225,6 +273,9 @@ def _screen_neutral(cands: Sequence[Candidate], current: Diagram, base_names: tu
     old = [index[n] for n in base_names]
     Jo = J[:, old] / norms[old]
     Goo, go = Jo.T @ Jo, Jo.T @ e
+    w, V = eigh(Goo, check_finite=False)
+    keep = w > RCOND * w[-1] if w.size and w[-1] > 0 else np.zeros(w.size, dtype=bool)
+    Goo_pinv = (V[:, keep] / w[keep]) @ V[:, keep].T
     scores = []
     for c, new in groups:
         # only the blocks of the Gram matrix this candidate needs: old x old (shared), old x new, new x new
@@ -238,6 +289,8 @@ def _screen_neutral(cands: Sequence[Candidate], current: Diagram, base_names: tu
         score = base.gn_cost - predicted
         dof = max(rank - base.rank, 0) + c.effect.extra_dof
         stat, p = _significance(score, dof, base)
+        if base.layout is not None:
+            stat, p = _neutral_significance(base, Jo, Jn, e, Goo_pinv @ Gon)
         scores.append(Score(c, score, base.cost, predicted, dof, stat, p))
     return scores
 

@@ -62,6 +62,11 @@ class Baseline:
     n_residuals: int
     n_theta: int
     sigma2: float
+    # the residual's layout and the residual after the current chart's full Gauss-Newton step, from which the
+    # significance reads the noise (diagnose.noise); None: the white-noise statistic
+    layout: object = None
+    e_hat: object = None
+    names: tuple[str, ...] = ()
 
     @property
     def gn_cost(self) -> float:
