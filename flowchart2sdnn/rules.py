@@ -45,7 +45,7 @@ _BOOK: tuple[Rule, ...] = (
        note="equal to crawl_iterations, stage_max_iter, tracked_window by coincidence"),
     _r("trainlm_mu0", 1e-3, "damping", "trainlm's first damping: a Gauss-Newton step slightly shortened.",
        "fit.damping.TRAINLM_MU0", "fit.lm.LMOptions.mu0",
-       note="equal to identify_tau, initstate_tau, alpha by coincidence"),
+       note="equal to identify_tau, initstate_tau by coincidence"),
     _r("lm_mu_inc", 10.0, "factor", "trainlm's schedule: a refused step raises the damping tenfold.",
        "fit.lm.LMOptions.mu_inc", note="equal to weight_growth by coincidence"),
     _r("lm_mu_dec", 0.1, "factor", "trainlm's schedule: an accepted step lowers the damping tenfold.",
@@ -142,7 +142,7 @@ _BOOK: tuple[Rule, ...] = (
        flags=("identify --max-iter", "diagnose --max-iter", "batch --max-iter")),
     _r("identify_tau", 1e-3, "factor", "The first damping scaled to the problem (Madsen-Nielsen-Tingleff's "
        "suggestion), for a fit from a chart's rough init.", "identify.settings.IDENTIFY_TAU",
-       note="equal to trainlm_mu0, initstate_tau, alpha by coincidence"),
+       note="equal to trainlm_mu0, initstate_tau by coincidence"),
     _r("refit_tau", 0.0, "factor", "Off (trainlm's fixed first damping) for brief refits that start next to a "
        "fit.", "identify.settings.REFIT_TAU", "diagnose.fitting.DiagnoseSettings.lm_tau"),
     _r("online_tau", 1.0, "factor", "The quasi-online window's first damping, measured on the paper "
@@ -215,7 +215,7 @@ _BOOK: tuple[Rule, ...] = (
        "noise-free data and converges in a few steps.", "identify.assess.floorbias.BIAS_ITER",
        note="equal to lm_max_mu_tries, oracle_min, rows_per_quantity by coincidence"),
     _r("beta_settled", 0.05, "fraction of beta", "A bias that moves less than this over the second half of a "
-       "long refit has settled.", "identify.assess.floorbias.BETA_SETTLED"),
+       "long refit has settled.", "identify.assess.floorbias.BETA_SETTLED", note="equal to alpha by coincidence"),
     _r("bias_warn", 0.5, "standard errors", "From here a 95 % interval centred on the estimate misses the truth "
        "visibly more often than 1 in 20.", "identify.assess.floorbias.BIAS_WARN",
        note="equal to wide_column, held_chatter, follow_fraction by coincidence"),
@@ -225,7 +225,7 @@ _BOOK: tuple[Rule, ...] = (
        "before this.", "identify.offline.initstate._OPTIONS"),
     _r("initstate_tau", 1e-3, "factor", "The first damping scaled to the problem, for states started from the "
        "record.", "identify.offline.initstate._OPTIONS",
-       note="equal to trainlm_mu0, identify_tau, alpha by coincidence"),
+       note="equal to trainlm_mu0, identify_tau by coincidence"),
     _r("initstate_min_rel_cost_change", 1e-12, "fraction of the cost", "The states' fit stops when an "
        "iteration only polishes rounding.", "identify.offline.initstate._OPTIONS",
        note="equal to lm_min_rel_step, cost_rounding, rcond by coincidence"),
@@ -296,9 +296,10 @@ _BOOK: tuple[Rule, ...] = (
        "diagnose.fitting.DiagnoseSettings.runners_up"),
     _r("refit_iter", 40, "iterations", "A brief refit starts next to a fit and needs tens of iterations.",
        "diagnose.fitting.DiagnoseSettings.refit_iter", flags=("diagnose --refit-iter",)),
-    _r("alpha", 1e-3, "probability", "The score test's significance level: few false places among many.",
-       "diagnose.fitting.DiagnoseSettings.alpha", flags=("diagnose --alpha",),
-       note="equal to trainlm_mu0, identify_tau, initstate_tau by coincidence"),
+    _r("alpha", 0.05, "probability", "The score test's significance level per round, shared by every candidate "
+       "scored (Bonferroni): at most a 5 % chance that a round refits a place where the chart lacks nothing.",
+       "diagnose.fitting.DiagnoseSettings.alpha", "diagnose.choice._significant", flags=("diagnose --alpha",),
+       note="equal to beta_settled by coincidence"),
     _r("min_gain", 0.02, "fraction of the validation RMS", "An effect must lower the validation RMS by 2 %.",
        "diagnose.fitting.DiagnoseSettings.min_gain", flags=("diagnose --min-gain",)),
     _r("horizon", 500, "samples", "The growing horizon's first stage: shorter than the time a chaotic drive's "

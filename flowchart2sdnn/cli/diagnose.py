@@ -107,7 +107,7 @@ EFFECTS = {"Effect search": ("rounds", "effect_names", "effects_file", "top", "s
               help="The validation MSE must fall by more than the floor squared plus this many standard errors of "
                    "its fall, read off the fall's spread over the parts of the validation records (0: off).")
 @click.option("--alpha", type=click.FloatRange(0, 1, min_open=True, max_open=True), default=rules.value("alpha"),
-              show_default=True, help="Significance level of the score test.")
+              show_default=True, help="Significance level of the score test per round, shared by the candidates scored (Bonferroni).")
 @click.option("--dead-time-max", type=click.IntRange(min=1, max=10000), default=20, show_default=True,
               help="dead_time scans n = 1..this many samples.")
 @click.option("--harmonics", default="1,2,3,4,6,8,12", show_default=True,

@@ -29,17 +29,24 @@ def candidates(effects: Sequence[Effect], current: Diagram, scales: Scales, done
     return out
 
 
-def _significant(s: Score, settings: DiagnoseSettings) -> bool:
-    return s.scored and s.score > 0 and s.p_value < settings.alpha
+def _significant(s: Score, settings: DiagnoseSettings, tests: int = 1) -> bool:
+    """Significant at the round's level `alpha` shared by the `tests` candidates scored (Bonferroni): the chance
+    that a round refits some place where nothing is missing stays below alpha however many places a chart has."""
+    return s.scored and s.score > 0 and s.p_value < settings.alpha / max(1, tests)
+
+
+def _tests(scr: Screen) -> int:
+    return sum(1 for s in scr.scores if s.scored)
 
 
 def refit_set(scr: Screen, settings: DiagnoseSettings) -> list[Score]:
     """The best option of each of the `top` best places with a significant score, plus the runners-up of the
     best place's scan (a dead time's n or a cogging harmonic is decided by refitting, not by the score)."""
-    best = [s for s in scr.best_per_place() if _significant(s, settings)][: settings.top]
+    n = _tests(scr)
+    best = [s for s in scr.best_per_place() if _significant(s, settings, n)][: settings.top]
     if best and settings.runners_up > 0:
         key = best[0].candidate.key
-        more = [s for s in scr.scores if _significant(s, settings) and s.candidate.key == key and s is not best[0]]
+        more = [s for s in scr.scores if _significant(s, settings, n) and s.candidate.key == key and s is not best[0]]
         best[1:1] = more[: settings.runners_up]
     return best
 
@@ -80,7 +87,7 @@ def second_look_places(scr: Screen, best: list[Score], refits: list[tuple[Score,
     if not settings.second_look or any(not far_above_noise(f, train, settings, SECOND_LOOK) for _, f in refits):
         return []
     have = {s.candidate.key for s in best}
-    rest = [s for s in scr.best_per_place() if _significant(s, settings) and s.candidate.key not in have]
+    rest = [s for s in scr.best_per_place() if _significant(s, settings, _tests(scr)) and s.candidate.key not in have]
     return rest[: settings.top]
 
 
