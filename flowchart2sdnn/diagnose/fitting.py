@@ -251,7 +251,7 @@ def behind(target: float, max_iter: int):
         reach = cost - pace * max(max_iter - it, 0)
         if reach > target:
             return (f"at iteration {it} the cost {cost:.6g} falls {pace:.3g} an iteration; over the {max_iter - it} "
-                    f"left it cannot reach {target:.6g}, the round's best refit")
+                    f"left it cannot reach {target:.6g}, the cost to beat (the round's best refit, or the current fit's)")
         return None
     return cutoff
 

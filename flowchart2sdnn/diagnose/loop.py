@@ -187,7 +187,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                            "score_rows_added": [s.candidate.title() for s in prefix_best[1]] if prefix_best else []}
             refits: list[tuple[Score, Fitted]] = []
             for s, fitted, seconds in brief_refits(best, nominal_chart, train, records, settings, extra_dof, accepted,
-                                              executor, lambda text, r=r: say(f"round {r}: {text}", None)):
+                                              executor, lambda text, r=r: say(f"round {r}: {text}", None),
+                                              current.cost):
                 timing["refit"].append(seconds)
                 if was_interrupted(fitted):
                     raise KeyboardInterrupt
@@ -197,7 +198,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             if more:
                 say(f"round {r}: no refit near the noise; refitting {len(more)} more places", None)
                 for s, fitted, seconds in brief_refits(more, nominal_chart, train, records, settings, extra_dof,
-                                                  accepted, executor, lambda text, r=r: say(f"round {r}: {text}", None)):
+                                                  accepted, executor, lambda text, r=r: say(f"round {r}: {text}", None),
+                                                  current.cost):
                     timing["refit"].append(seconds)
                     if was_interrupted(fitted):
                         raise KeyboardInterrupt

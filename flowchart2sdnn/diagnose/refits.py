@@ -100,7 +100,8 @@ def control_report(control: Fitted | None, used: bool) -> dict | None:
 
 
 def brief_refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Dataset], records,
-            settings: DiagnoseSettings, extra_dof: int, accepted: list, executor, say: Callable[[str], None]):
+            settings: DiagnoseSettings, extra_dof: int, accepted: list, executor, say: Callable[[str], None],
+            current_cost: float = math.inf):
     """(score, the better of its brief refits or None, seconds) for each candidate in `best`, in order.
 
     Each candidate is refitted from the current fit and from the chart as given (plus the accepted effects),
@@ -110,7 +111,8 @@ def brief_refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Data
     the current fit.
 
     A refit is cut off (:func:`~.fitting.behind`) once it cannot reach the lowest training cost of a refit before
-    it. Not also below a relevance bar (the current fit's cost lowered by ``min_gain`` of its RMS): measured, that
+    it, and the first one once it cannot reach `current_cost` (the current fit's: a refit ending above it is no
+    better than the chart without the effect, as the control refit is cut). Not also below a relevance bar (the current fit's cost lowered by ``min_gain`` of its RMS): measured, that
     cut the EMPS friction refit while its learned curve was still slow to start, and a saturation took its place
     (tests/test_real_emps.py).
     """
@@ -137,7 +139,7 @@ def brief_refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Data
     # candidate by candidate, best score first, both starts of one candidate together (the executor's work), each
     # cut off at the lowest cost a refit before it reached (fitting.behind): a refit that cannot reach the round's
     # best stops after a few iterations. The waves do not depend on the executor, so neither do the results.
-    leader, done = math.inf, 0
+    leader, done = current_cost, 0
     for i in dict.fromkeys(owner):
         batch = [(*u, leader) for u, o in zip(units, owner, strict=True) if o == i]
         results = map(refit_unit, batch) if executor is None else executor.map(refit_unit, batch)
