@@ -30,7 +30,7 @@ SHORTEN = [
     (r"--seconds 30 ", "--seconds 2 ", 1),
     (r"--seconds 100 ", "--seconds 3 ", 1),
     (r"--window 25000 --average 25000", "--window 1000 --average 1000", 1),
-    (r"--starts (4|16)", "--starts 2", 2),
+    (r"--starts (2|16)", "--starts 2", 2),
     (r"--horizon 100", "--horizon 20", 1),
     (r"(python examples/make_fleet\.py tour/logs)", r"\1 --drives 2 --days 2 --seconds 1", 1),
     (r"^(sdnn (?:identify \S+ tour/bench\S*|diagnose|batch) .*)$", r"\1 --max-iter 15", 5),
