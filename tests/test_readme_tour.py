@@ -105,8 +105,8 @@ def test_the_readme_tour_runs_as_written(tmp_path, monkeypatch):
                   for c, out in printed.items() if _on_the_bundled_examples(c)}
         assert any("examples/data/engine_idle.csv" in c for c in warned)
         assert {c: lines for c, lines in warned.items() if lines} == {}, f"run {run}"
-        # the bench's fits stop short, yet the tour's two-mass chart resolves its fastest mode: stage 2 and the
-        # starts in parallel measure no discretization floor or bias worth a warning
+        # the bench's fits stop short, yet the tour's two-mass chart resolves its fastest mode: stage 2, the
+        # quasi-online run and the starts in parallel measure no discretization floor or bias worth a warning
         floor = {c: [line for line in out.splitlines() if "warning[FLOOR" in line]
                  for c, out in printed.items() if c.startswith("sdnn identify diagrams/two_mass.yaml")}
         assert len(floor) == 3 and {c: lines for c, lines in floor.items() if lines} == {}, f"run {run}"
