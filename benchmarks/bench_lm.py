@@ -6,7 +6,7 @@ bounds): scipy.optimize.least_squares (method "trf", bounds, 2-point finite-diff
 a simulation of the same numba kernel). Both run a fixed number of iterations; the table gives the time per
 iteration, the ratio and the final cost.
 
-Problem: diagrams/two_mass.yaml (15 free quantities: J2, c, d and the 12 friction weights of both machines)
+Problem: diagrams/two_mass.yaml on the paper's network (tests/data/two_mass_euler.yaml, N = 1; 15 free quantities: J2, c, d and the 12 friction weights of both machines)
 on 25 s of diagrams/two_mass_plant.yaml (w2 measured), excited as in section 6.1 (seed 1); start J2 = 0.45,
 c = 450, d = 0.25 and the compiled friction weights; J2, c, d >= 0; our mu0 = 100 (from mu0 = 1e-3 the first
 steps send the friction weights where the Euler-discretised friction loop chatters and the Jacobian overflows).
@@ -51,7 +51,7 @@ def main() -> None:
     q = 25000
     data = excite(load_diagram(ROOT / "diagrams/two_mass_plant.yaml"), ExcitationSettings(seconds=q / 1000, seed=1))
     u, y = data["M1"][:, None], data["w2"]
-    cn = CompiledNetwork(compile_file(ROOT / "diagrams/two_mass.yaml").network)
+    cn = CompiledNetwork(compile_file(ROOT / "tests/data/two_mass_euler.yaml").network)
     x0 = cn.theta0()
     x0[:3] = [0.45, 450.0, 0.25]
     lower = np.array([0.0, 0.0, 0.0] + [-np.inf] * (cn.n_theta - 3))

@@ -59,14 +59,14 @@ def flops_per_sample(cn: CompiledNetwork) -> float:
 
 
 def stage2_network(stage1: dict, substeps: int | str, delays: str | None = None) -> CompiledNetwork:
-    """two_mass.yaml at `substeps` (1: the paper's network) with J1 and the motor friction of stage 1 fixed.
+    """two_mass.yaml (tests/data/two_mass_euler.yaml: the paper's scheme) at `substeps` (1: the paper's network) with J1 and the motor friction of stage 1 fixed.
 
     `auto` reads the chart's modes at its start values (c = 100, J2 = 0.7), as `sdnn identify --fix-from ...
     --substeps auto` does; J1 is 0.1912 in the chart already, the value stage 1 finds."""
     if delays is None:
-        net = compile_file(ROOT / "diagrams/two_mass.yaml", substeps=substeps).network
+        net = compile_file(ROOT / "tests/data/two_mass_euler.yaml", substeps=substeps).network
     else:  # another delay rule than the chart's (the paper's search)
-        chart = dataclasses.replace(load_diagram(ROOT / "diagrams/two_mass.yaml"), delays=delays)
+        chart = dataclasses.replace(load_diagram(ROOT / "tests/data/two_mass_euler.yaml"), delays=delays)
         net = compile_diagram(chart, substeps=substeps).network
     return CompiledNetwork(dataclasses.replace(
         net,
@@ -78,7 +78,7 @@ def stage2_network(stage1: dict, substeps: int | str, delays: str | None = None)
 
 def auto_at(values: dict) -> int:
     """The N that `substeps: auto` picks for two_mass.yaml with its parameters at `values` (its fastest mode)."""
-    d = load_diagram(ROOT / "diagrams/two_mass.yaml")
+    d = load_diagram(ROOT / "tests/data/two_mass_euler.yaml")
     d = dataclasses.replace(d, parameters=tuple(dataclasses.replace(p, init=float(values.get(p.name, p.init)))
                                                 for p in d.parameters))
     return compile_diagram(d, substeps="auto").network.substeps

@@ -1,7 +1,8 @@
 """Multi-start on local workers: 16 starts of the paper's two-mass identification, serial vs N processes.
 
 The data come from the virtual test bench (``excite`` on diagrams/two_mass_plant.yaml); the fitted chart is
-diagrams/two_mass.yaml (physical J2, c, d and two learned friction curves). Both runs must give bit-identical
+diagrams/two_mass.yaml on the paper's network (tests/data/two_mass_euler.yaml: physical J2, c, d and two learned
+friction curves, one step per sample). Both runs must give bit-identical
 results; the speed-up is the serial wall time over the parallel one, measured once with the pool's start-up
 included and then, in interleaved serial / parallel pairs, with a pool that is already running. The load
 average is printed with every measurement: on a shared machine other processes take cores away. Linux with
@@ -34,7 +35,7 @@ REPO = Path(__file__).resolve().parents[1]
 
 def _data(seconds: float, directory: Path) -> tuple:
     plant = load_diagram(str(REPO / "diagrams" / "two_mass_plant.yaml"))
-    chart = load_diagram(str(REPO / "diagrams" / "two_mass.yaml"))
+    chart = load_diagram(str(REPO / "tests" / "data" / "two_mass_euler.yaml"))
     path = directory / "two_mass.csv"
     write_csv(path, excite(plant, ExcitationSettings(seconds=seconds, seed=1, noise_std=0.01)), "%.17g")
     return chart, read_csv(str(path), required_columns(chart), None, chart.sample_time)

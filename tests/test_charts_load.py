@@ -97,7 +97,7 @@ def test_every_example_lints_clean_and_compiles(name):
 
 def test_sample_time_folds_into_the_weight_before_an_integrator():
     """The paper's T/J1: the weight MB1 -> w1 is the sample time over the inertia, for any J1."""
-    net = compile_file(DIAGRAMS / "two_mass.yaml").network
+    net = compile_file(ROOT / "tests" / "data" / "two_mass_euler.yaml").network  # the paper's network: N = 1
     layer = {la.name: m for m, la in enumerate(net.layers)}
     (j,) = [j for j, w in enumerate(net.weights)
             if w.matrix == "LW" and w.layer == layer["w1"] and w.source == layer["MB1"]]

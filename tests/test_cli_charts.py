@@ -122,7 +122,7 @@ blocks:
 
 
 def test_compile_explain_shows_equations_and_the_delayed_edges():
-    result = _run("compile", str(DIAGRAMS / "two_mass.yaml"), "--explain")
+    result = _run("compile", str(ROOT / "tests" / "data" / "two_mass_euler.yaml"), "--explain")  # the paper's network
     assert result.exit_code == 0
     text = result.stdout
     assert re.search(r"LW\{2,1\}\(0\)\[1,1\]\s+= 0\.001\*\(1/J1\)", text)  # T/J1 into the w1 integrator

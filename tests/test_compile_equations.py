@@ -65,7 +65,8 @@ def _excitation(rng: np.random.Generator, q: int, columns: int = 1) -> np.ndarra
 def test_two_mass_matches_the_hand_recursion(seed):
     rng = np.random.default_rng(seed)
     text = (DIAGRAMS / "two_mass.yaml").read_text().replace("fixed: true", "fixed: false")  # J1 random too
-    cn, T = _compiled(_neurons(text), "two_mass.yaml")
+    paper = re.sub(r"(?m)^(substeps|delays):.*\n", "", text)  # at the paper's scheme, which the recursion follows
+    cn, T = _compiled(_neurons(paper), "two_mass.yaml")
     theta = _random_theta(cn, rng)
     p, w = cn.values(theta)
     assert set(w) == {f"MR{m}.{r}{i}" for m in (1, 2) for r in "av" for i in (1, 2, 3)}
@@ -90,7 +91,7 @@ def test_two_mass_matches_the_hand_recursion(seed):
 
 
 def test_two_mass_delays_exactly_the_papers_feedback_edges():
-    net = compile_diagram(load_diagram(DIAGRAMS / "two_mass.yaml")).network
+    net = compile_diagram(replace(load_diagram(DIAGRAMS / "two_mass.yaml"), substeps=1, delays="search")).network
     got = {(e.source, e.target, e.delay) for e in net.delayed_edges}
     assert got == {("MR1", "MB1", 1), ("MC", "MB1", 1), ("MD", "MB1", 1), ("w2", "dw", 1), ("MR2", "MB2", 1)}
     for e in net.delayed_edges:  # each names a loop through the delayed edge, starting at its target

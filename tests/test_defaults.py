@@ -100,13 +100,20 @@ def test_compile_explain_prints_the_default_n(tmp_path):
     assert "substeps N = 1 " in one.output and "auto" not in one.output.split("substeps N = 1")[1]
 
 
-@pytest.mark.parametrize("pinned", ["paper/engine.yaml", "paper/two_mass.yaml", "paper/plant.yaml",
-                                    "two_mass.yaml"])
+@pytest.mark.parametrize("pinned", ["paper/engine.yaml", "paper/two_mass.yaml", "paper/plant.yaml"])
 def test_the_papers_charts_pin_its_scheme(pinned):
-    """The paper's experiment and the README's first commands keep the network they were measured with."""
+    """The paper's experiment keeps the network it was measured with."""
     d = load_diagram(DIAGRAMS / pinned)
     assert (d.substeps, d.delays) == (1, "search")
     assert compile_diagram(d).network.substeps == 1
+
+
+@pytest.mark.parametrize("chart", ["engine.yaml", "two_mass.yaml"])
+def test_the_charts_users_copy_take_the_accurate_scheme(chart):
+    """The README tour's charts fit on mid-step torques and several steps per sample, not the paper's network."""
+    d = load_diagram(DIAGRAMS / chart)
+    assert d.delays == "midpoint" and isinstance(d.substeps, int) and d.substeps > 1
+    assert compile_diagram(d).network.substeps == d.substeps
 
 
 def test_identify_records_the_default_and_dumps_the_fitted_n(tmp_path):

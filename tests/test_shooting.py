@@ -37,7 +37,7 @@ ROOT = Path(__file__).resolve().parent.parent
 
 COULOMB = ROOT / "diagrams" / "two_mass_coulomb.yaml"
 COULOMB_PLANT = ROOT / "diagrams" / "two_mass_coulomb_plant.yaml"
-LEARNED = ROOT / "diagrams" / "two_mass.yaml"
+LEARNED = ROOT / "tests" / "data" / "two_mass_euler.yaml"  # diagrams/two_mass.yaml at N = 1
 LEARNED_PLANT = ROOT / "diagrams" / "two_mass_plant.yaml"
 
 

@@ -29,6 +29,7 @@ from flowchart2sdnn.simulate.excitation import ExcitationSettings, excite
 from tests.test_rtrl import assert_jacobian_matches
 
 DIAGRAMS = Path(__file__).resolve().parents[1] / "diagrams"
+EULER = Path(__file__).resolve().parent / "data" / "two_mass_euler.yaml"  # two_mass.yaml at N = 1
 
 LAG = """\
 sdnn: 1
@@ -84,9 +85,9 @@ def test_substeps_converge_to_the_exact_step_response():
 
 
 def test_substeps_one_is_todays_network_bit_for_bit():
-    """`substeps: 1` (two_mass.yaml pins it) and --substeps 1 over a chart without the key or with another N
+    """`substeps: 1` (two_mass_euler.yaml pins it) and --substeps 1 over a chart without the key or with another N
     give the same network and the same numbers, to the last bit."""
-    base = load_diagram(DIAGRAMS / "two_mass.yaml")
+    base = load_diagram(EULER)
     assert base.substeps == 1 and base.delays == "search"
     nets = [compile_diagram(base).network, compile_diagram(dataclasses.replace(base, substeps=None), substeps=1).network,
             compile_diagram(dataclasses.replace(base, substeps=4), substeps=1).network]

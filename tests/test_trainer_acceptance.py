@@ -16,6 +16,7 @@ from flowchart2sdnn.fit.lm import LMOptions, levenberg_marquardt
 from flowchart2sdnn.network.runtime import CompiledNetwork
 
 DIAGRAMS = Path(__file__).resolve().parents[1] / "diagrams"
+EULER = Path(__file__).resolve().parent / "data" / "two_mass_euler.yaml"  # two_mass.yaml at N = 1
 
 
 def _excitation(n: int, seed: int) -> np.ndarray:
@@ -42,7 +43,7 @@ def test_rtrl_jacobian_of_compiled_charts_equals_central_differences(chart):
 
 
 def _two_mass_with_known_friction():
-    d = load_diagram(DIAGRAMS / "two_mass.yaml")
+    d = load_diagram(EULER)  # the paper's network: one step per sample
     curve = NonlinearWeights(a=(2.0, 0.5, 8.0), v=(0.3, 0.2, 0.1))
     blocks = tuple(replace(b, weights=curve, fixed=True) if b.kind == "nonlinear" else b for b in d.blocks)
     return replace(d, blocks=blocks)

@@ -171,7 +171,10 @@ class Problem:
             c, g = rest_radii(self.network, self.network.weight_values(params, free))
             chatter, growth = max(chatter, c), max(growth, g)
         n = self.network.substeps
-        return chatter, (growth if n == 1 else growth ** n)
+        try:
+            return chatter, (growth if n == 1 else growth ** n)
+        except OverflowError:  # a radius far above 1 (a huge gain) to the power N: unbounded growth all the same
+            return chatter, float("inf")
 
     def bounds(self) -> tuple[np.ndarray, np.ndarray]:
         """(lower, upper) of the free quantities: the parameters' min and max, unbounded where none is given
