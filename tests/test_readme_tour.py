@@ -1,7 +1,6 @@
 """The README's five-minute tour runs as written, twice in a row: its commands are read from the README's code
 block, shortened by the substitutions below (each must apply, so a changed README fails here instead of
-drifting), and run one by one in a fresh directory that holds only the repository's diagrams/, examples/ and
-tests/data/.
+drifting), and run one by one in a fresh directory that holds only the repository's diagrams/ and examples/.
 
 `sdnn` commands run in this process (click's runner: the numba kernels compile once), other commands (`python`,
 `rm`, `mkdir`) as subprocesses; every command must exit 0 and write what it says it writes, into `tour/` only.
@@ -91,8 +90,6 @@ def test_the_readme_tour_runs_as_written(tmp_path, monkeypatch):
     pytest.importorskip("matplotlib")  # step 5 draws (the plots extra, which the test extra installs)
     for name in ("diagrams", "examples"):
         (tmp_path / name).symlink_to(ROOT / name)
-    (tmp_path / "tests").mkdir()
-    (tmp_path / "tests" / "data").symlink_to(ROOT / "tests" / "data")
     monkeypatch.chdir(tmp_path)
     env = {**os.environ, "PYTHONPATH": os.pathsep.join([str(ROOT), os.environ.get("PYTHONPATH", "")])}
     before = sorted(p.name for p in tmp_path.iterdir())
@@ -110,6 +107,14 @@ def test_the_readme_tour_runs_as_written(tmp_path, monkeypatch):
         floor = {c: [line for line in out.splitlines() if "warning[FLOOR" in line]
                  for c, out in printed.items() if c.startswith("sdnn identify diagrams/two_mass.yaml")}
         assert len(floor) == 3 and {c: lines for c, lines in floor.items() if lines} == {}, f"run {run}"
+        # diagnose's chart resolves the mode of the friction it adds: its final fit's floor is a few % of the
+        # residual. Its other warnings are the shortened run's (2 s of data, 15 iterations: the third effect it
+        # accepts cannot be told apart, the bias refit stops short); on the 30 s bench it warns of nothing
+        [diagnosed] = [out for c, out in printed.items() if c.startswith("sdnn diagnose")]
+        percent = re.findall(r"^discretization floor .*: w1 \S+ \(([\d.]+) % of RMS\), w2 \S+ \(([\d.]+) % of RMS\)",
+                             diagnosed, re.M)
+        assert len(percent) == 1 and max(map(float, percent[0])) < 10, (run, percent)
+        assert "warning[FLOOR001]" not in diagnosed and "warning[FLOOR004]" not in diagnosed, f"run {run}"
         tour = tmp_path / "tour"
         missing = [f for f in WRITTEN if not (tour / f).is_file()]
         assert missing == [], f"run {run}"
