@@ -16,6 +16,7 @@ PACKAGE = Path(__file__).resolve().parent.parent / "flowchart2sdnn"
 RANKS = {
     "_version": 0, "errors": 0, "notices": 0, "tables": 0, "strictjson": 0,
     "rules": 0,  # the rule book: every threshold's one default (imports nothing)
+    "threads": 0,  # one BLAS thread around the library's computations (imports nothing of ours)
     "views": 0,  # the registry report/ fills for results that draw on request (Identification.compare(plot=))
     "atomic": 1, "expr": 1, "executors": 1,
     "diagram": 2, "fit": 2, "data": 2,
