@@ -32,7 +32,8 @@ from scipy.stats import chi2, norm
 
 from .. import rules
 
-__all__ = ["NOISE_LAG_WINDOW", "Layout", "NoiseSpectrum", "noise_spectrum", "score_test", "gain_test"]
+__all__ = ["NOISE_LAG_WINDOW", "Layout", "NoiseSpectrum", "noise_spectrum", "step_residual", "score_test",
+           "gain_test"]
 
 #: the covariances are estimated up to this fraction of each record's rows (rules.py)
 NOISE_LAG_WINDOW = rules.value("noise_lag_window")
@@ -104,8 +105,9 @@ def noise_spectrum(e: np.ndarray, layout: Layout, window: float = NOISE_LAG_WIND
     return NoiseSpectrum(layout, tuple(spectra), tuple(sizes))
 
 
-def _step_residual(X: np.ndarray, e: np.ndarray) -> np.ndarray:
-    """e with its least-squares projection on X's columns taken out (directions below RCOND dropped)."""
+def step_residual(X: np.ndarray, e: np.ndarray) -> np.ndarray:
+    """The residual after the full (unbounded) Gauss-Newton step: e with its least-squares projection on X's
+    columns taken out (directions below RCOND dropped, as in the score)."""
     norms = np.linalg.norm(X, axis=0)
     norms[norms == 0] = 1.0
     Xs = X / norms
@@ -121,7 +123,7 @@ def score_test(layout: Layout, J_perp: np.ndarray, e: np.ndarray, e_current: np.
     """(statistic, rank, p) of new columns `J_perp` (orthogonal to the current ones) on residual `e`;
     `e_current` is the residual after the current chart's full step, from which the candidate's own step is
     taken before the noise's spectrum is read."""
-    noise = noise_spectrum(_step_residual(J_perp, e_current), layout)
+    noise = noise_spectrum(step_residual(J_perp, e_current), layout)
     g = J_perp.T @ e
     w, V = eigh(noise.covariance(J_perp), check_finite=False)
     if not w.size or not w[-1] > 0:

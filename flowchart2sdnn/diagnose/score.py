@@ -54,7 +54,7 @@ from ..diagram.curves import weight_names
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify import Problem, build_problem
-from .noise import Layout, gain_test, score_test
+from .noise import Layout, gain_test, score_test, step_residual
 from .scored import Baseline, Candidate, Score, Screen
 
 __all__ = ["RCOND", "Candidate", "Baseline", "Score", "Screen", "gauss_newton_decrease", "new_quantities", "screened",
@@ -157,26 +157,13 @@ def baseline_of(problem: Problem) -> tuple[Baseline, np.ndarray, np.ndarray]:
     dec, rank = _decrease(*_gram(J, e), sign=_bound_sign(problem))
     sigma2 = 2 * cost / max(1, e.size - rank)
     layout = Layout(tuple(len(s.targets) for s in problem.segments), problem.targets.shape[1])
-    return Baseline(cost, dec, rank, e.size, J.shape[1], sigma2, layout, _after_step(J, e),
+    return Baseline(cost, dec, rank, e.size, J.shape[1], sigma2, layout, step_residual(J, e),
                     tuple(problem.names)), e, J
-
-
-def _after_step(J: np.ndarray, e: np.ndarray) -> np.ndarray:
-    """The residual after the full (unbounded) Gauss-Newton step: e with its projection on J's columns taken
-    out (directions below RCOND dropped, as in the score)."""
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
-    Js = J / norms
-    w, V = eigh(Js.T @ Js, check_finite=False)
-    if not w.size or not w[-1] > 0:
-        return e
-    keep = w > RCOND * w[-1]
-    return e - Js @ (V[:, keep] @ ((V[:, keep].T @ (Js.T @ e)) / w[keep]))
 
 
 def _neutral_significance(base: Baseline, Jo: np.ndarray, Jn: np.ndarray, e: np.ndarray,
                           coupling: np.ndarray | None = None) -> tuple[float, float]:
-    """(T², p) of a neutral candidate's new columns `Jn` beyond the current ones `Jo` (both column-normalised;
+    """(statistic, p) of a neutral candidate's new columns `Jn` beyond the current ones `Jo` (both column-normalised;
     `coupling` = Jo⁺Jn when known) under the residual's noise (diagnose.noise.score_test)."""
     if coupling is None:
         coupling = np.linalg.lstsq(Jo, Jn, rcond=None)[0] if Jo.shape[1] else np.zeros((0, Jn.shape[1]))
@@ -189,7 +176,7 @@ def _scanned_significance(base: Baseline, e: np.ndarray, J: np.ndarray) -> tuple
     its full Gauss-Newton step, under the residual's noise (diagnose.noise.gain_test)."""
     if e.shape != base.e_hat.shape:
         return math.nan, math.nan
-    e_hat = _after_step(J, e)
+    e_hat = step_residual(J, e)
     gain = 0.5 * (float(base.e_hat @ base.e_hat) - float(e_hat @ e_hat))
     return gain_test(base.layout, gain, e_hat, base.e_hat - e_hat)
 
