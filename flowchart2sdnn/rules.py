@@ -99,6 +99,8 @@ _BOOK: tuple[Rule, ...] = (
        note="equal to lm_min_rel_step, initstate_min_rel_cost_change, rcond by coincidence"),
     _r("trust_poor_gain", 0.25, "gain ratio", "A step whose actual decrease is below a quarter of the model's "
        "was poorly predicted: the trust radius shrinks (Moré 1978).", "fit.steps.TRUST_POOR",
+       "diagnose.choice.ONE_STEP_TRUST (a candidate's one Gauss-Newton step, simulated, says where its refit goes "
+       "only when so predicted)",
        note="equal to trust_shrink, linearity_tol, dense_fraction by coincidence"),
     _r("trust_good_gain", 0.75, "gain ratio", "A step whose actual decrease is above three quarters of the "
        "model's was well predicted: the trust radius grows (Moré 1978).", "fit.steps.TRUST_GOOD",
@@ -132,7 +134,7 @@ _BOOK: tuple[Rule, ...] = (
     _r("zero_cost", 1e-14, "fraction of the largest start cost", "Costs this small are an exact fit, never a "
        "local minimum.", "fit.multistart._ZERO_COST"),
     _r("whiteness_max_lag", 25, "lags", "The residual correlation test's lags (as MATLAB's resid).",
-       "fit.correlation.MAX_LAG", note="equal to top_options by coincidence"),
+       "fit.correlation.MAX_LAG"),
     _r("whiteness_level", 0.99, "probability", "The confidence band's level for a correlation of white noise.",
        "fit.correlation.LEVEL"),
     # --- identify: its settings and the rules of its modules ---
@@ -182,7 +184,8 @@ _BOOK: tuple[Rule, ...] = (
     _r("far_above_noise", 5.0, "ratio of RMS", "A complete chart at its minimum ends within about 4x the noise "
        "(the discretization floor included); 5x means an effect is missing or the fit is in a local minimum.",
        "identify.settings.FAR_ABOVE_NOISE", "identify.offline.run (the far-above-noise warning)",
-       "diagnose.choice.SECOND_LOOK", flags=("diagnose --second-look",)),
+       "diagnose.choice.SECOND_LOOK", "diagnose.choice.one_step_relevant (within it, one Gauss-Newton step is "
+       "trusted to say what a refit reaches)", flags=("diagnose --second-look",)),
     _r("online_window", 25000, "samples", "The paper's quasi-online window Q.",
        "identify.settings.IdentifySettings.window", flags=("identify --window",),
        note="equal to online_average by coincidence"),
@@ -288,9 +291,10 @@ _BOOK: tuple[Rule, ...] = (
        flags=("diagnose --rounds",), note="equal to reseat_rounds, cutoff_pace by coincidence"),
     _r("top", 5, "places", "Places refitted per round.", "diagnose.fitting.DiagnoseSettings.top",
        flags=("diagnose --top",)),
-    _r("top_options", 25, "options", "A non-neutral candidate's options (found by "
-       "simulation) that get the full score test.",
-       "diagnose.fitting.DiagnoseSettings.top_options", note="equal to whiteness_max_lag by coincidence"),
+    _r("top_options", 3, "options", "A non-neutral candidate's options that get the full score test (an RTRL "
+       "pass each), ranked by their cost after the current chart's own step: the best and the runners_up "
+       "a refit may need.", "diagnose.fitting.DiagnoseSettings.top_options", "diagnose.score.screen",
+       note="equal to rounds, reseat_rounds, cutoff_pace by coincidence; runners_up + 1 by design"),
     _r("runners_up", 2, "options", "Further options of the best place's scan (a "
        "dead time's n, a cogging harmonic) refitted too: refits, not the score, decide a discrete choice.",
        "diagnose.fitting.DiagnoseSettings.runners_up"),
@@ -301,7 +305,8 @@ _BOOK: tuple[Rule, ...] = (
        "diagnose.fitting.DiagnoseSettings.alpha", "diagnose.choice._significant", flags=("diagnose --alpha",),
        note="equal to beta_settled by coincidence"),
     _r("min_gain", 0.02, "fraction of the validation RMS", "An effect must lower the validation RMS by 2 %.",
-       "diagnose.fitting.DiagnoseSettings.min_gain", flags=("diagnose --min-gain",)),
+       "diagnose.fitting.DiagnoseSettings.min_gain", "diagnose.choice.passes_gain (acceptance, the control's "
+       "need, one_step_relevant)", flags=("diagnose --min-gain",)),
     _r("horizon", 500, "samples", "The growing horizon's first stage: shorter than the time a chaotic drive's "
        "trajectories take to part.", "diagnose.fitting.DiagnoseSettings.horizon", flags=("diagnose --horizon",),
        note="equal to lag_zero_max_lag by coincidence"),

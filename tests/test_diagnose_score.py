@@ -149,3 +149,45 @@ def test_new_quantities_lists_parameters_and_curve_weights(setup):
     assert {f"fric_v.v{i}" for i in range(1, 8)} <= set(names) and not any(".a" in n or ".b" in n for n in names)
     p = build_problem(cands[0].diagram, data)
     assert set(names) == set(p.names) - set(problem.names)
+
+
+def test_the_score_carries_its_least_squares_step(setup):
+    """The step a score stands for (Score.step, what choice.one_step_relevant simulates) is the least-squares step
+    of the patched chart's finite-difference Jacobian (minimum norm where two columns are one: damping's b_v
+    beside the chart's b)."""
+    data, _, problem, cands = setup
+    (s,) = screen([cands[1]], problem, data).scores
+    p = build_problem(s.candidate.diagram, data)
+    x = p.compiled.theta0()
+    J = _fd_jacobian(p, x)
+    oracle = dict(zip(p.names, lstsq(J, p.residual(x), lapack_driver="gelsd")[0], strict=True))
+    step = dict(s.step)
+    assert set(step) == set(oracle)
+    for name, value in oracle.items():
+        assert step[name] == pytest.approx(value, rel=1e-4, abs=1e-9), name
+
+
+def test_one_step_point_simulates_the_step(setup):
+    """one_step_point moves the patched chart by the step and free-runs it: on the training record itself both its
+    training cost and its validation RMS are the problem's own residual at theta0 + step, and the step lowers it."""
+    from flowchart2sdnn.diagnose.fitting import DiagnoseSettings, one_step_point
+
+    data, _, problem, cands = setup
+    (s,) = screen([cands[1]], problem, data).scores
+    cost, rms = one_step_point(s.candidate.diagram, s.step, [data], [(data, 0)], DiagnoseSettings())
+    p = build_problem(s.candidate.diagram, data)
+    x = p.compiled.theta0() + np.array([dict(s.step)[n] for n in p.names])
+    e = p.residual(x)
+    assert cost == pytest.approx(0.5 * e @ e, rel=1e-12)
+    assert rms == pytest.approx(np.sqrt(e @ e / e.size), rel=1e-12)
+    e0 = p.residual(p.compiled.theta0())
+    assert rms < 0.5 * np.sqrt(e0 @ e0 / e0.size)
+
+
+def test_a_column_the_chart_already_has_is_not_significant(setup):
+    """Damping at v adds b_v beside the chart's own b: the same column. Its score is 0, and so must its statistic
+    be (what is left of the column beyond b is round-off, whose own variance must not normalise it)."""
+    data, _, problem, cands = setup
+    (s,) = screen([cands[1]], problem, data).scores
+    assert s.score == pytest.approx(0.0, abs=1e-9 * problem.n_residuals)
+    assert s.statistic == 0.0 and s.p_value == 1.0

@@ -76,14 +76,16 @@ def read_candidate(d: Mapping) -> CandidateRow:
 def read_round(d: Mapping) -> Round:
     """A :class:`Round` from its REPORT.json mapping."""
     plain = {f.name: d.get(f.name) for f in fields(Round)
-             if f.name not in ("before", "after", "control", "score_rows", "score_rows_added", "second_look")}
+             if f.name not in ("before", "after", "control", "score_rows", "score_rows_added", "second_look",
+                               "one_step")}
     c = d.get("control")
     return Round(**plain, before=fit_summary(d["before"]),
                  after=None if d.get("after") is None else fit_summary(d["after"]),
                  control=None if c is None else Control(c.get("start"), c.get("rms"), c.get("validation_rms"),
                                                          bool(c.get("used_as_baseline")), bool(c.get("final"))),
                  score_rows=_tuple(d.get("score_rows")), score_rows_added=tuple(d.get("score_rows_added") or ()),
-                 second_look=tuple(d.get("second_look") or ()))
+                 second_look=tuple(d.get("second_look") or ()),
+                 one_step=tuple(dict(x) for x in d.get("one_step") or ()))
 
 
 def read_accepted(d: Mapping) -> AcceptedEffect:

@@ -21,6 +21,7 @@ from ..identify import (
     REFIT_TAU,
     Identification,
     IdentifySettings,
+    build_problem,
     data_init,
     estimate_initial_state,
     identify,
@@ -39,7 +40,7 @@ from .fitstate import (
 
 __all__ = ["DiagnoseSettings", "Fitted", "fit_chart", "with_floor", "fit_growing", "horizons", "current_problem",
            "effect_scales", "residual_analysis", "DEFAULT_SPLIT", "VALIDATION_SEGMENTS", "gain_spread", "unpredictable",
-           "far_above_noise", "still_moving"]
+           "far_above_noise", "still_moving", "one_step_point"]
 
 DEFAULT_SPLIT = rules.value("default_split")
 #: The validation records are cut into about this many consecutive parts in all (at least 2 per record): the
@@ -87,6 +88,9 @@ class DiagnoseSettings:
     # judge each round's candidates also against the current chart refitted as briefly without any effect
     # (loop._control): False only to measure what that control prevents
     control_refit: bool = True
+    # near the noise, refit only the significant neutral candidates whose one Gauss-Newton step lowers the
+    # validation RMS by min_gain (choice.one_step_relevant): False only to measure what that saves and changes
+    one_step: bool = True
     # trace only from a converged first fit (False: --allow-unconverged, trace anyway)
     require_converged: bool = True
     # > 0: each validation record's initial state is fitted on its first init_window samples (identify.offline.initstate)
@@ -201,21 +205,48 @@ def _validate(ident: Identification, records: Sequence[tuple[Dataset, int]], ali
     """Free-run metrics on each validation record from its first scored row; with `init_window` each record
     starts from the integrators' state fitted on its first `init_window` rows (parameters fixed) and is scored
     from the later of that row and the record's own first row."""
-    compiled = ident.problem.compiled
+    return _validate_at(ident.problem.compiled, ident.x, records, alignment, init_window)
+
+
+def _validate_at(compiled, x: np.ndarray, records: Sequence[tuple[Dataset, int]], alignment: str,
+                 init_window: int = 0) -> dict:
     parts = max(2, math.ceil(VALIDATION_SEGMENTS / max(len(records), 1)))
     per = []
     for ds, start in records:
         if init_window:
-            state = estimate_initial_state(compiled, ident.x, ds, alignment, init_window,
-                                           data_init(ident.problem.network, ds))
-            m = metrics(compiled, ident.x, ds, alignment, score_from=max(start, init_window), history=state.history,
+            state = estimate_initial_state(compiled, x, ds, alignment, init_window, data_init(compiled.net, ds))
+            m = metrics(compiled, x, ds, alignment, score_from=max(start, init_window), history=state.history,
                         segments=parts)
             m["initial_state"] = state.to_dict()
         else:
-            m = metrics(compiled, ident.x, ds, alignment, score_from=start, segments=parts)
+            m = metrics(compiled, x, ds, alignment, score_from=start, segments=parts)
         per.append(m)
     return {"rms_all": _rms_all(per, compiled.n_outputs), "records": per,
             "rms_records": [_rms_all([m], compiled.n_outputs) for m in per]}
+
+
+def one_step_point(diagram: Diagram, step: Sequence[tuple[str, float]], train: list[Dataset], records,
+                   settings: DiagnoseSettings) -> tuple[float, float]:
+    """(training cost, validation RMS of every output as :attr:`Fitted.validation_rms`) of `diagram` at its
+    values moved by `step` ((theta name, change) pairs: a score's Gauss-Newton step, :class:`~.scored.Score`),
+    held inside the bounds: where one step of a refit lands, simulated, not linearised. inf where the chart does
+    not build or diverges."""
+    try:
+        problem = build_problem(diagram, train[0], settings.alignment, settings.seed, more=tuple(train[1:]))
+    except (SdnnError, ValueError, KeyError):
+        return math.inf, math.inf
+    x = problem.compiled.theta0().copy()
+    index = {n: i for i, n in enumerate(problem.names)}
+    for name, change in step:
+        if name in index:
+            x[index[name]] += change
+    lower, upper = problem.bounds()
+    x = np.clip(x, lower, upper)
+    e = problem.residual(x)
+    if e is None:
+        return math.inf, math.inf
+    return 0.5 * float(e @ e), _validate_at(problem.compiled, x, records, settings.alignment,
+                                            settings.init_window)["rms_all"]
 
 
 def fit_chart(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int,
@@ -258,7 +289,9 @@ def behind(target: float, max_iter: int):
 
 def _identify(diagram: Diagram, train: list[Dataset], settings: DiagnoseSettings, max_iter: int,
               progress: Progress | None = None, cutoff=None) -> Identification:
-    # floor_bias off: diagnose compares costs and validation RMS, never the intervals, over many refits
+    # floor_bias off: diagnose compares costs and validation RMS, never the intervals, over many refits; the
+    # floor on the training records only for the full fits (a brief refit's is never read, and the oracle's run of
+    # a 30 s record took 9 % of a two-mass diagnose: bench_diagnose_time.py, seed 11, py-spy)
     full = max_iter >= settings.max_iter
     # trainlm's damping and the bound transform: diagnose's decisions were measured with them (identify.settings.
     # LM_DAMPING, LM_BOUNDS); with the box's trust radius a chaotic drive's neutral cogging refit stayed at 10x the
@@ -266,8 +299,8 @@ def _identify(diagram: Diagram, train: list[Dataset], settings: DiagnoseSettings
     # before the overflow (tests/test_diagnose_overflow.py). Which optimiser a decision needs is a symptom the
     # decision rule itself must remove; until then the measured one stays.
     s = IdentifySettings(max_iter=max_iter, seed=settings.seed, alignment=settings.alignment, lm_tau=settings.lm_tau,
-                         floor_bias=False, shooting=settings.shooting if full else "off", lm_damping="trainlm",
-                         lm_bounds="transform")
+                         floor_bias=False, floor=full, shooting=settings.shooting if full else "off",
+                         lm_damping="trainlm", lm_bounds="transform")
     return identify(diagram, train if len(train) > 1 else train[0], None, s, progress, cutoff=cutoff)
 
 

@@ -6,7 +6,9 @@ One round:
 2. every effect of the library at every place and option is scored by the score test (:mod:`.score`); when the
    current fit is unpredictable and loses the record part way (a chaotic drive), also on the part of each record
    it still follows (:mod:`.tracked`), whose best place joins the refits of step 3;
-3. the best ``top`` places whose score is significant are refitted briefly (``refit_iter`` LM iterations),
+3. near the noise, a significant neutral candidate whose one Gauss-Newton step (simulated on the validation
+   records) does not lower the validation RMS by ``min_gain`` is dropped (choice.one_step_relevant); the best
+   ``top`` places whose score is significant are refitted briefly (``refit_iter`` LM iterations),
    from the current fit with the effect added at neutral values, and from the chart as given with every
    accepted effect and this one added at neutral values (a refit only from the previous fit gets stuck where
    the previous fit bent its parameters to imitate the missing effect); a candidate that is not neutral (a
@@ -46,7 +48,9 @@ from .choice import (
     SECOND_LOOK,
     candidates,
     done_key,
+    one_step_relevant,
     order_refits,
+    passes_gain,
     prefix_screen,
     refit_set,
     refusal,
@@ -185,6 +189,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             # candidates it added to the refits
             round_extra = {"score_rows": rows,
                            "score_rows_added": [s.candidate.title() for s in prefix_best[1]] if prefix_best else []}
+            significant = best
+            best, round_extra["one_step"] = one_step_relevant(best, current, train, records, settings)
             refits: list[tuple[Score, Fitted]] = []
             for s, fitted, seconds in brief_refits(best, nominal_chart, train, records, settings, extra_dof, accepted,
                                               executor, lambda text, r=r: say(f"round {r}: {text}", None),
@@ -194,7 +200,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                     raise KeyboardInterrupt
                 if fitted is not None:
                     refits.append((s, fitted))
-            more = second_look_places(scr, best, refits, train, settings) if refits else []
+            more = second_look_places(scr, significant, refits, train, settings) if refits else []
             if more:
                 say(f"round {r}: no refit near the noise; refitting {len(more)} more places", None)
                 for s, fitted, seconds in brief_refits(more, nominal_chart, train, records, settings, extra_dof,
@@ -217,13 +223,17 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                                   "validation_rms_after": finite_or_none(f.validation_rms),
                                   settings.criterion + "_after": finite_or_none(f.criterion(settings.criterion))})
                 candidates_out.append(entry)
-            if not best:
+            if not significant:
                 stop_reason = "nothing_significant"
                 break
             refits = order_refits(refits, settings)
+            # the control only ever refuses more: a refit whose validation RMS does not fall by min_gain against
+            # the current fit falls by less against a control that validates better (and a control that validates
+            # worse is not used). With no refit past that bar the round accepts nothing with or without it: skip it
             control = (control_fit(current, nominal_chart, train, records, settings, extra_dof, accepted, executor,
                                 horizon=any(not s.candidate.neutral for s in best))
-                       if settings.control_refit else None)
+                       if settings.control_refit and any(passes_gain(f, current, settings) for _, f in refits)
+                       else None)
             if was_interrupted(control):
                 raise KeyboardInterrupt
             baseline = current
@@ -239,7 +249,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                 if finished.cost <= control.cost and finished.validation_rms <= control.validation_rms:
                     control = finished
                 baseline = with_floor(control, records, settings)
-            choice, reason = None, "no refit succeeded"
+            choice, reason = None, ("no refit succeeded" if best else "no significant place's Gauss-Newton step "
+                                    f"lowers the validation RMS by {settings.min_gain:g} (one_step)")
             for s, f in refits:
                 why = refusal(f, baseline, settings)
                 if why is not None and baseline is not current:
@@ -248,11 +259,11 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                 if why is None:
                     choice = (s, f)
                     break
-                if choice is None and reason == "no refit succeeded":
+                if choice is None and reason == "no refit succeeded":  # the first refused refit says why
                     reason = f"{s.candidate.title()}: {why}"
             control_entry = control_report(control, baseline is not current)
             if choice is None:
-                s, f = refits[0] if refits else (best[0], None)
+                s, f = refits[0] if refits else (significant[0], None)
                 rounds.append({**_round_entry(r, s, current, f, False, reason, settings), "control": control_entry,
                                **round_extra})
                 stop_reason = "nothing_accepted"

@@ -142,6 +142,9 @@ class Round:
     score_rows: tuple[int, ...] | None = None
     score_rows_added: tuple[str, ...] = ()
     second_look: tuple[str, ...] = ()
+    # the significant places judged by their one Gauss-Newton step near the noise (choice.one_step_relevant):
+    # {candidate, validation_rms, refitted} each
+    one_step: tuple[Mapping[str, Any], ...] = ()
 
     @property
     def title(self) -> str:

@@ -28,7 +28,9 @@ curve whose output weights are 0) drop out, which is right: to first order they 
 Cost: every neutral candidate is patched into ONE chart (at the neutral point none of them changes the
 outputs or the others' sensitivities), so one RTRL pass gives all their columns; each candidate is then a
 small eigenproblem on its rows and columns of one Gram matrix. A candidate that is not neutral needs its own
-pass: first the cost of each of its options by simulation, then the full score for the ``top_options`` best.
+pass: first the cost of each of its options by simulation, projected off the current chart's columns (what the
+current quantities' own step would leave, the patched chart's sensitivities taken as the current one's), then the
+full score for the ``top_options`` best by that cost.
 
 Significance: under the hypothesis that the chart lacks nothing and the residual is white with variance
 sigma^2, ``2 * score / sigma^2`` would be chi-square with ``dof`` degrees of freedom (the rank the candidate
@@ -81,24 +83,32 @@ def _decrease(G: np.ndarray, g: np.ndarray, rcond: float = RCOND, sign: np.ndarr
     Bounds by an active set: a quantity whose unconstrained step leaves its bound is held there (its column
     dropped) and the step recomputed, the worst offender first.
     """
+    dec, rank, _ = _solve(G, g, rcond, sign)
+    return dec, rank
+
+
+def _solve(G: np.ndarray, g: np.ndarray, rcond: float = RCOND, sign: np.ndarray | None = None):
+    """:func:`_decrease` and the step itself, G^+ g in the Gram matrix's (column-normalised) units, 0 where held."""
     active = np.ones(G.shape[0], dtype=bool)
+    full = np.zeros(G.shape[0])
     while True:
         idx = np.flatnonzero(active)
         if idx.size == 0:
-            return 0.0, 0
+            return 0.0, 0, full
         Gs, gs = G[np.ix_(idx, idx)], g[idx]
         w, V = eigh(Gs, check_finite=False)
         if not w.size or w[-1] <= 0:
-            return 0.0, 0
+            return 0.0, 0, full
         keep = w > rcond * w[-1]
         c = V[:, keep].T @ gs
+        step = V[:, keep] @ (c / w[keep])
         if sign is not None and np.any(sign[idx] != 0):
-            step = V[:, keep] @ (c / w[keep])
             wrong = step * sign[idx]
             if np.any(wrong < 0):
                 active[idx[int(np.argmin(wrong))]] = False
                 continue
-        return 0.5 * float(np.sum(c * c / w[keep])), int(np.sum(keep))
+        full[idx] = step
+        return 0.5 * float(np.sum(c * c / w[keep])), int(np.sum(keep)), full
 
 
 def gauss_newton_decrease(J: np.ndarray, e: np.ndarray, rcond: float = RCOND,
@@ -167,7 +177,15 @@ def _neutral_significance(base: Baseline, Jo: np.ndarray, Jn: np.ndarray, e: np.
     `coupling` = Jo⁺Jn when known) under the residual's noise (diagnose.noise.score_test)."""
     if coupling is None:
         coupling = np.linalg.lstsq(Jo, Jn, rcond=None)[0] if Jo.shape[1] else np.zeros((0, Jn.shape[1]))
-    stat, _, p = score_test(base.layout, Jn - Jo @ coupling, e, base.e_hat)
+    perp = Jn - Jo @ coupling
+    # only the directions the new columns add beyond the current ones, as the score's own rank (RCOND of the unit
+    # columns): what is left of a column the chart already has is round-off, and the test normalised by its own
+    # tiny variance called it significant (a second learned curve at w1: score 0, p = 1e-23)
+    w, V = eigh(perp.T @ perp, check_finite=False)
+    keep = w > RCOND
+    if not np.any(keep):
+        return 0.0, 1.0
+    stat, _, p = score_test(base.layout, perp @ V[:, keep], e, base.e_hat)
     return stat, p
 
 
@@ -197,7 +215,10 @@ def _bound_sign(problem: Problem) -> np.ndarray:
 
 def _score_from(c: Candidate, e: np.ndarray, J: np.ndarray, base: Baseline, problem: Problem) -> Score:
     cost = 0.5 * float(e @ e)
-    dec, rank = _decrease(*_gram(J, e), sign=_bound_sign(problem))
+    dec, rank, step = _solve(*_gram(J, e), sign=_bound_sign(problem))
+    norms = np.linalg.norm(J, axis=0)
+    norms[norms == 0] = 1.0
+    named = tuple(zip(problem.names, map(float, step / norms), strict=True))
     predicted = cost - dec
     score = base.gn_cost - predicted
     dof = max(rank - base.rank, 0) + c.effect.extra_dof
@@ -211,7 +232,26 @@ def _score_from(c: Candidate, e: np.ndarray, J: np.ndarray, base: Baseline, prob
         stat, p = _neutral_significance(base, J[:, old] / norms[old], J[:, new] / norms[new], e)
     elif base.layout is not None:
         stat, p = _scanned_significance(base, e, J)
-    return Score(c, score, cost, predicted, dof, stat, p)
+    return Score(c, score, cost, predicted, dof, stat, p, step=named)
+
+
+def _current_basis(J0: np.ndarray) -> np.ndarray:
+    """An orthonormal basis of the current chart's columns (directions below RCOND dropped, as in the score)."""
+    norms = np.linalg.norm(J0, axis=0)
+    norms[norms == 0] = 1.0
+    Js = J0 / norms
+    w, V = eigh(Js.T @ Js, check_finite=False)
+    if not w.size or not w[-1] > 0:
+        return np.zeros((J0.shape[0], 0))
+    keep = w > RCOND * w[-1]
+    return Js @ (V[:, keep] / np.sqrt(w[keep]))
+
+
+def _after_current_step(e: np.ndarray, basis: np.ndarray) -> float:
+    """1/2 ||e - P e||^2, P the projector on the current chart's columns (`basis`, :func:`_current_basis`): the
+    cost a patched chart would reach by moving the current quantities along their current sensitivities."""
+    r = e - basis @ (basis.T @ e)
+    return 0.5 * float(r @ r)
 
 
 def _error(c: Candidate, text: str) -> Score:
@@ -271,14 +311,16 @@ def _screen_neutral(cands: Sequence[Candidate], current: Diagram, base_names: tu
         Gon = Jo.T @ Jn
         G = np.block([[Goo, Gon], [Gon.T, Jn.T @ Jn]])
         sign = np.concatenate([bound_sign[old], bound_sign[cols]])
-        dec, rank = _decrease(G, np.concatenate([go, Jn.T @ e]), sign=sign)
+        dec, rank, step = _solve(G, np.concatenate([go, Jn.T @ e]), sign=sign)
+        scaled = step / np.concatenate([norms[old], norms[cols]])  # back from the column-normalised units
+        named = tuple(zip([problem.names[i] for i in old + cols], map(float, scaled), strict=True))
         predicted = base.cost - dec
         score = base.gn_cost - predicted
         dof = max(rank - base.rank, 0) + c.effect.extra_dof
         stat, p = _significance(score, dof, base)
         if base.layout is not None:
             stat, p = _neutral_significance(base, Jo, Jn, e, Goo_pinv @ Gon)
-        scores.append(Score(c, score, base.cost, predicted, dof, stat, p))
+        scores.append(Score(c, score, base.cost, predicted, dof, stat, p, step=named))
     return scores
 
 
@@ -315,8 +357,8 @@ def screen(candidates: Sequence[Candidate], problem: Problem, train: Sequence[Da
     train : sequence of Dataset
         The training record(s) `problem` was built from.
     top_options : int
-        For an effect that is not neutral, the options (per place) with the lowest simulated cost that get
-        the full score; the others keep only their simulated cost.
+        For an effect that is not neutral, the options (per place) with the lowest simulated cost after the
+        current chart's own step that get the full score; the others keep only their simulated cost.
 
     Returns
     -------
@@ -327,7 +369,7 @@ def screen(candidates: Sequence[Candidate], problem: Problem, train: Sequence[Da
 
     t0 = time.perf_counter()
     train = [train] if isinstance(train, Dataset) else list(train)
-    base, e0, _ = baseline_of(problem)
+    base, e0, J0 = baseline_of(problem)
     passes = {"jacobian": 1, "simulation": 0}
     neutral = [c for c in candidates if c.neutral]
     others = [c for c in candidates if not c.neutral]
@@ -342,7 +384,8 @@ def screen(candidates: Sequence[Candidate], problem: Problem, train: Sequence[Da
             passes["jacobian"] += len(neutral)
         scores += joint
     # not neutral: the cost of every option by simulation, the full score for the best few per place
-    groups: dict[tuple[str, str], list[tuple[Candidate, float | None, str | None, Problem | None]]] = {}
+    groups: dict[tuple[str, str], list[tuple]] = {}
+    basis = _current_basis(J0) if others else None
     for i, c in enumerate(others):
         if progress:
             progress(f"scan {c.title()}", (i + 1) / max(1, len(others)))
@@ -354,15 +397,20 @@ def screen(candidates: Sequence[Candidate], problem: Problem, train: Sequence[Da
             cost, err = (0.5 * float(e @ e), None) if e is not None else (None, "diverges")
         except (SdnnError, ValueError, KeyError) as exc:
             cost, err = None, _message(exc)
-        groups.setdefault(c.key, []).append((c, cost, err, p))
+        rank_cost = None if cost is None else _after_current_step(e, basis) if e.shape == e0.shape else cost
+        groups.setdefault(c.key, []).append((c, cost, err, p, rank_cost))
     for items in groups.values():
-        ok = sorted((x for x in items if x[1] is not None), key=lambda x: x[1])
-        for rank, (c, cost, _, p) in enumerate(ok):
+        # the options of one place in the order of their cost after the current chart's own step (the patched
+        # chart's sensitivities taken as the current one's): a scan's best option by its plain cost is not the
+        # best once the other quantities move (a dead time's n), and the full score of every option cost an RTRL
+        # pass each, 90 a round on the two-mass drive
+        ok = sorted((x for x in items if x[1] is not None), key=lambda x: x[4])
+        for rank, (c, cost, _, p, _) in enumerate(ok):
             if rank < top_options:
                 scores.append(_score_one(c, base, train, alignment, seed, p))
                 passes["jacobian"] += 1
             else:
                 scores.append(Score(c, math.nan, cost, None))
-        scores += [_error(c, err or "failed") for c, cost, err, _ in items if cost is None]
+        scores += [_error(c, err or "failed") for c, cost, err, _, _ in items if cost is None]
     ranked = sorted(scores, key=lambda s: (not s.scored, -(s.score if s.scored else 0.0)))
     return Screen(base, tuple(ranked), time.perf_counter() - t0, passes)

@@ -88,6 +88,9 @@ class Score:
     statistic: float = math.nan
     p_value: float = math.nan
     error: str | None = None
+    # the full Gauss-Newton step the score stands for, (theta name, change) over the patched chart's quantities
+    # (the current ones and the candidate's): where the one-step point validates (choice.one_step_relevant)
+    step: tuple = ()
 
     @property
     def scored(self) -> bool:

@@ -181,6 +181,10 @@ class IdentifySettings:
     floor_bias : bool        estimate the discretization's bias beta on each parameter by refitting the network to
                              the continuous oracle's run of the identified chart (identify.assess.floorbias) and widen
                              ci95 by |beta| (see :data:`FLOOR_BIAS`); offline fits only (quasi-online skips it)
+    floor : bool             measure the discretization floor on the training records (identify.assess.floor) and,
+                             with ``substeps: auto``, refit at a finer N where it shows the step too coarse; False
+                             skips both (diagnose's brief refits, which compare training costs only: the continuous
+                             oracle's run of a 30 s record cost as much as a refit's iterations)
     curve_start : str        "stick": learned curves without stored weights in a feedback loop start from a
                              stick-slip step and a brief fit (identify.offline.curvestart, :data:`CURVE_START`); "random": the
                              chart's seeded +-init_range weights. Offline fits only.
@@ -208,6 +212,7 @@ class IdentifySettings:
     shooting: str | int = SHOOTING
     shooting_starts: str = SHOOTING_STARTS
     floor_bias: bool = FLOOR_BIAS
+    floor: bool = True
     threads: int = 1
     curve_start: str = CURVE_START
 

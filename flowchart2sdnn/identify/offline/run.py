@@ -199,6 +199,8 @@ def identify(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: D
     disc = discretization(diagram, problem.network)
     if status == "diverged_at_start":
         disc["floor"] = {"rms": None, "skipped": "the fit diverged at its start"}
+    elif not settings.floor:
+        disc["floor"] = {"rms": None, "skipped": "not measured (floor off: a fit that only compares costs)"}
     else:
         records = [train] + more
         try:  # the floor and the bias both compare with this run: simulate it once
