@@ -50,17 +50,18 @@ class _Recording(SerialExecutor):
 
 
 def test_the_refits_go_through_the_executor(case):
-    """Every brief refit is a work unit handed to the executor: two per refitted candidate (from the current
-    fit and from the chart as given) in one map per candidate, and the round's control (the chart refitted
-    without any effect, from the same two starts) in a last map of two units."""
+    """Every brief refit is a work unit handed to the executor: one map per refitted candidate (from the current
+    fit, and far above the noise also from the chart as given), and a round's control (the chart refitted without
+    any effect, from the same starts) in a last map."""
     ex = _Recording()
     par = diagnose(chart("one_mass"), case["train"], [case["val"]], SETTINGS, EFFECTS, executor=ex)
     refitted = sum(1 for c in par.report["candidates"] if c.get("refitted"))
-    judged = len(par.report["rounds"])  # rounds that refitted candidates (and so ran a control)
-    assert judged == SETTINGS.rounds
+    assert len(par.report["rounds"]) == SETTINGS.rounds
+    controls = sum(1 for r in par.report["rounds"] if r["control"] is not None)
+    assert controls >= 1
     assert {fn for fn, _ in ex.calls} == {refit_unit}
-    assert len(ex.calls) == refitted + judged
-    assert [n for _, n in ex.calls] == [2] * (refitted + judged)
+    assert len(ex.calls) == refitted + controls
+    assert all(n in (1, 2) for _, n in ex.calls) and 2 in [n for _, n in ex.calls]
     assert _without_timing(par.report) == _without_timing(case["serial"].report)
 
 

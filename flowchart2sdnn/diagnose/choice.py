@@ -113,20 +113,24 @@ ONE_STEP_TRUST = rules.value("trust_poor_gain")
 
 
 def one_step_relevant(best: list[Score], current: Fitted, train: list[Dataset], records,
-                      settings: DiagnoseSettings) -> tuple[list[Score], list[dict]]:
+                      settings: DiagnoseSettings, near: bool) -> tuple[list[Score], list[dict]]:
     """The places worth a refit, and REPORT.json's `one_step` rows ({candidate, rho, validation_rms, refitted})
-    for those judged.
+    for those judged; `near`: the current fit is near the noise (not :func:`far_above_noise` by ``SECOND_LOOK``).
 
-    Acceptance asks a refit to lower the validation RMS by ``min_gain`` (:func:`passes_gain`). Near the noise (the
-    current fit's training residual within ``far_above_noise`` x the noise) a fit is nearly linear, and one
-    Gauss-Newton step lands about where a brief refit ends (seed 11 of bench_diagnose_time.py, round 2: training
-    cost falls predicted 0.24, 0.24, 0.12, refits reached 0.24, 0.24, 0.12). A neutral candidate is not refitted
-    when its step, simulated, is trusted on the training records (rho >= ONE_STEP_TRUST) and does not lower the
-    validation RMS by min_gain. A step the linearisation mispredicts (a learned curve's steep basis: one step to
-    a validation RMS of 0.16 where the refit reached 0.020) is no guide, and far above the noise one step falls
-    short of a refit (the same seed, round 1: 701 predicted, 1729 reached): those are refitted."""
-    if not (best and settings.one_step) or far_above_noise(current, train, settings, SECOND_LOOK):
+    Each significant neutral candidate is moved by the Gauss-Newton step its score stands for and simulated. When
+    the step is well predicted (its training cost falls by at least ONE_STEP_TRUST of the linearised fall: the
+    trust-region ratio rho), it says where a refit goes:
+    * near the noise a fit is nearly linear and one step lands about where a brief refit ends (seed 11 of
+      bench_diagnose_time.py, round 2: training cost falls predicted 0.24, 0.24, 0.12, refits reached 0.24, 0.24,
+      0.12): a step that does not lower the validation RMS by ``min_gain`` (:func:`passes_gain`) is not refitted;
+    * far above the noise one step falls short of a refit (the same seed, round 1: 701 predicted, 1729 reached),
+      so only a step that lowers the validation RMS not at all is not refitted (three-mass drive, seed 11, round 1:
+      three such places, each refused when refitted).
+    A step the linearisation mispredicts (a learned curve's steep basis: one step to a validation RMS of 0.16
+    where the refit reached 0.020) is no guide: refitted."""
+    if not (best and settings.one_step):
         return best, []
+    bar = current.validation_rms * ((1 - settings.min_gain) if near else 1.0)
     keep, rows = [], []
     for s in best:
         if not (s.candidate.neutral and s.step and s.predicted_cost is not None):
@@ -135,10 +139,8 @@ def one_step_relevant(best: list[Score], current: Fitted, train: list[Dataset], 
         cost, rms = one_step_point(s.candidate.diagram, s.step, train, records, settings)
         predicted = s.cost - s.predicted_cost
         rho = (current.cost - cost) / predicted if predicted > 0 else math.nan
-        trusted = rho >= ONE_STEP_TRUST
         rows.append({"candidate": s.candidate.title(), "rho": finite_or_none(rho),
-                     "validation_rms": finite_or_none(rms),
-                     "refitted": not trusted or rms < current.validation_rms * (1 - settings.min_gain)})
+                     "validation_rms": finite_or_none(rms), "refitted": not rho >= ONE_STEP_TRUST or rms < bar})
         if rows[-1]["refitted"]:
             keep.append(s)
     return keep, rows

@@ -69,6 +69,7 @@ from .fitting import (
     Progress,
     current_problem,
     effect_scales,
+    far_above_noise,
     fit_chart,
     gain_spread,
     horizons,
@@ -190,11 +191,12 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             round_extra = {"score_rows": rows,
                            "score_rows_added": [s.candidate.title() for s in prefix_best[1]] if prefix_best else []}
             significant = best
-            best, round_extra["one_step"] = one_step_relevant(best, current, train, records, settings)
+            near = not far_above_noise(current, train, settings, SECOND_LOOK)
+            best, round_extra["one_step"] = one_step_relevant(best, current, train, records, settings, near)
             refits: list[tuple[Score, Fitted]] = []
             for s, fitted, seconds in brief_refits(best, nominal_chart, train, records, settings, extra_dof, accepted,
                                               executor, lambda text, r=r: say(f"round {r}: {text}", None),
-                                              current.cost):
+                                              current.cost, near):
                 timing["refit"].append(seconds)
                 if was_interrupted(fitted):
                     raise KeyboardInterrupt
@@ -205,7 +207,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                 say(f"round {r}: no refit near the noise; refitting {len(more)} more places", None)
                 for s, fitted, seconds in brief_refits(more, nominal_chart, train, records, settings, extra_dof,
                                                   accepted, executor, lambda text, r=r: say(f"round {r}: {text}", None),
-                                                  current.cost):
+                                                  current.cost, near):
                     timing["refit"].append(seconds)
                     if was_interrupted(fitted):
                         raise KeyboardInterrupt
@@ -231,7 +233,8 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
             # the current fit falls by less against a control that validates better (and a control that validates
             # worse is not used). With no refit past that bar the round accepts nothing with or without it: skip it
             control = (control_fit(current, nominal_chart, train, records, settings, extra_dof, accepted, executor,
-                                horizon=any(not s.candidate.neutral for s in best))
+                                horizon=any(not s.candidate.neutral for s in best),
+                                from_current_only=near and all(s.candidate.neutral for s in best))
                        if settings.control_refit and any(passes_gain(f, current, settings) for _, f in refits)
                        else None)
             if was_interrupted(control):

@@ -60,7 +60,8 @@ def refit_unit(unit: tuple) -> tuple[Fitted | None, float]:
 
 
 def control_fit(current: Fitted, nominal_chart: Diagram, train: list[Dataset], records, settings: DiagnoseSettings,
-             extra_dof: int, accepted: list, executor, horizon: bool = False) -> Fitted | None:
+             extra_dof: int, accepted: list, executor, horizon: bool = False,
+             from_current_only: bool = False) -> Fitted | None:
     """The current chart refitted as briefly as the candidates, without any new effect, from the current fit and
     from the chart as given (plus the accepted effects), and with `horizon` (some candidate was refitted so)
     also with the growing horizon from the chart as given: the lower training cost, or None.
@@ -71,14 +72,16 @@ def control_fit(current: Fitted, nominal_chart: Diagram, train: list[Dataset], r
     tests/test_diagnose_false_alarms.py). The control gets every start a candidate got: a first fit in a local
     minimum (converged, train RMS 0.52 at noise 0.003) was left by the growing-horizon refit of a scanned
     overflow limit the chart did not need (validation RMS 0.382 -> 0.0030, accepted), while the control without
-    that start stayed at 0.382 (false-alarm bench, physical two-mass chart, seed 2; docs/diagnose.md)."""
+    that start stayed at 0.382 (false-alarm bench, physical two-mass chart, seed 2; docs/diagnose.md). With
+    `from_current_only` (every candidate was refitted from the current fit only: :func:`brief_refits`' `near`)
+    the control is too."""
     acc = tuple(a["effect"] + "@" + a["at"] for a in accepted)
     grow = GROW_ALWAYS if horizon else GROW_IF_UNPREDICTABLE
     # the control matters only where it goes below the current fit's cost: cut off where it cannot
     units = [(current.diagram, train, records, settings, settings.refit_iter, extra_dof, "control", acc, grow,
               current.cost),
              (nominal_chart, train, records, settings, settings.refit_iter, extra_dof, "control_nominal", acc, grow,
-              current.cost)]
+              current.cost)][: 1 if from_current_only else 2]
     results = map(refit_unit, units) if executor is None else executor.map(refit_unit, units)
     best = None
     for fitted, _sec in results:
@@ -101,7 +104,7 @@ def control_report(control: Fitted | None, used: bool) -> dict | None:
 
 def brief_refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Dataset], records,
             settings: DiagnoseSettings, extra_dof: int, accepted: list, executor, say: Callable[[str], None],
-            current_cost: float = math.inf):
+            current_cost: float = math.inf, near: bool = False):
     """(score, the better of its brief refits or None, seconds) for each candidate in `best`, in order.
 
     Each candidate is refitted from the current fit and from the chart as given (plus the accepted effects),
@@ -109,6 +112,11 @@ def brief_refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Data
     neutral is refitted from the chart as given twice, on the whole records at once and with a growing
     horizon (``settings.horizon``), in one work unit. The lowest training cost wins, ties go to the refit from
     the current fit.
+
+    `near`: the current fit is near the noise; a neutral candidate is then refitted from the current fit only.
+    The start from the chart as given is for a fit that bent its parameters to imitate a missing effect; a fit
+    within ``far_above_noise`` x the noise has little left to imitate, and near it the refit's landscape is nearly
+    quadratic (one Gauss-Newton step's training fall predicted within a few % on the benches' second rounds).
 
     A refit is cut off (:func:`~.fitting.behind`) once it cannot reach the lowest training cost of a refit before
     it, and the first one once it cannot reach `current_cost` (the current fit's: a refit ending above it is no
@@ -127,8 +135,9 @@ def brief_refits(best: Sequence[Score], nominal_chart: Diagram, train: list[Data
         # always: a learned curve bent on the first 500 samples first ends elsewhere (EMPS: the learned curve
         # then wins over the physical friction terms)
         grow = GROW_IF_UNPREDICTABLE if c.neutral else GROW_ALWAYS
-        for start, chart in (("previous", lambda c=c: c.diagram),
-                             ("nominal", lambda c=c: c.effect.patch(nominal_chart, c.place, c.option))):
+        starts = (("previous", lambda c=c: c.diagram),
+                  ("nominal", lambda c=c: c.effect.patch(nominal_chart, c.place, c.option)))
+        for start, chart in starts[:1] if (near and c.neutral) else starts:
             try:
                 units.append((chart(), train, records, settings, settings.refit_iter, dof, start, acc, grow))
             except (SdnnError, ValueError, KeyError):
