@@ -106,7 +106,7 @@ _BOOK: tuple[Rule, ...] = (
        "model's was well predicted: the trust radius grows (Moré 1978).", "fit.steps.TRUST_GOOD",
        note="equal to identify_geodesic by coincidence"),
     _r("trust_shrink", 0.25, "fraction of the step", "After a poor gain or a refusal the radius becomes a "
-       "quarter of the step (Moré 1978).", "fit.steps.TRUST_SHRINK", "fit.lm._trials",
+       "quarter of the step (Moré 1978).", "fit.steps.TRUST_SHRINK", "fit.lm._trials", "diagnose.choice.ONE_STEP_SHRINK",
        note="equal to trust_poor_gain, linearity_tol, dense_fraction by coincidence"),
     _r("trust_grow", 2.0, "multiple of the step", "After a good gain the radius becomes twice the step (Moré "
        "1978).", "fit.steps.TRUST_GROW", note="equal to noise_margin, spread_z by coincidence"),
@@ -314,7 +314,7 @@ _BOOK: tuple[Rule, ...] = (
        "standard errors.", "diagnose.fitting.DiagnoseSettings.spread_z", flags=("diagnose --spread-z",),
        note="equal to trust_grow, noise_margin by coincidence"),
     _r("rcond", 1e-12, "relative singular value", "The score test's least squares treat smaller singular values "
-       "as zero.", "diagnose.score.RCOND",
+       "as zero.", "diagnose.gauss_newton.RCOND", "diagnose.noise.RCOND",
        note="equal to lm_min_rel_step, cost_rounding, initstate_min_rel_cost_change by coincidence"),
     _r("noise_lag_window", 1 / 30, "fraction of a record", "The score test's noise spectrum: the residual's "
        "covariances up to 1/30 of the record (1 s of 30 s), far past a sensor's or a speed estimate's memory, "

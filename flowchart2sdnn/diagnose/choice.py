@@ -12,7 +12,7 @@ from ..data.csvdata import Dataset
 from ..diagram.model import Diagram
 from ..strictjson import finite_or_none
 from .effects import Effect, Scales
-from .fitting import DiagnoseSettings, Fitted, far_above_noise, gain_spread, one_step_point
+from .fitting import DiagnoseSettings, Fitted, far_above_noise, gain_spread, one_step_line
 from .score import Candidate, Score, Screen, screen
 from .tracked import prefix_problem, score_rows
 
@@ -108,39 +108,64 @@ def union_picks(best: list[Score], picks: list[Score], scr: Screen) -> list[Scor
 
 #: one Gauss-Newton step is trusted to say where a refit goes when the training cost it reaches, simulated, falls
 #: by at least this share of the fall its linearisation predicts: the trust-region rule that calls a step below it
-#: poorly predicted (the trainer's own, fit.steps.TRUST_POOR)
+#: poorly predicted (the trainer's own, fit.steps.TRUST_POOR); a poorly predicted step is shortened as the
+#: trainer's trust radius is (fit.steps.TRUST_SHRINK)
 ONE_STEP_TRUST = rules.value("trust_poor_gain")
+ONE_STEP_SHRINK = rules.value("trust_shrink")
+
+
+def _trusted_step(cost_at, current: Fitted, predicted: float) -> tuple[float | None, float]:
+    """(t, rho): the longest t x the step, from 1 down by ONE_STEP_SHRINK, whose simulated training fall is at
+    least ONE_STEP_TRUST of the linearised fall (2t - t^2) x `predicted`; t None when the step is shortened to a
+    predicted fall below one unit of -2 log-likelihood at the residual's variance without being trusted (no guide
+    at any length that matters)."""
+    sigma2 = 2 * current.cost / max(current.n, 1)
+    t, rho = 1.0, math.nan
+    while predicted > 0 and sigma2 > 0:
+        fall = (2 * t - t * t) * predicted
+        rho = (current.cost - cost_at(t)) / fall
+        if rho >= ONE_STEP_TRUST:
+            return t, rho
+        if 2 * fall / sigma2 < 1:
+            break
+        t *= ONE_STEP_SHRINK
+    return None, rho
 
 
 def one_step_relevant(best: list[Score], current: Fitted, train: list[Dataset], records,
                       settings: DiagnoseSettings, near: bool) -> tuple[list[Score], list[dict]]:
-    """The places worth a refit, and REPORT.json's `one_step` rows ({candidate, rho, validation_rms, refitted})
-    for those judged; `near`: the current fit is near the noise (not :func:`far_above_noise` by ``SECOND_LOOK``).
+    """The places worth a refit, and REPORT.json's `one_step` rows ({candidate, step, rho, validation_rms,
+    refitted}) for those judged; `near`: the current fit is near the noise (not :func:`far_above_noise` by
+    ``SECOND_LOOK``).
 
-    Each significant neutral candidate is moved by the Gauss-Newton step its score stands for and simulated. When
-    the step is well predicted (its training cost falls by at least ONE_STEP_TRUST of the linearised fall: the
-    trust-region ratio rho), it says where a refit goes:
-    * near the noise a fit is nearly linear and one step lands about where a brief refit ends (seed 11 of
+    Each significant neutral candidate is moved along the Gauss-Newton step its score stands for and simulated.
+    The step is trusted where its training cost falls by at least ONE_STEP_TRUST of the linearised fall (the
+    trust-region ratio rho); a poorly predicted step is shortened, as a trust region is, to the longest trusted
+    part (:func:`_trusted_step`). A trusted step says where a refit goes:
+    * near the noise a fit is nearly linear and the whole step lands about where a brief refit ends (seed 11 of
       bench_diagnose_time.py, round 2: training cost falls predicted 0.24, 0.24, 0.12, refits reached 0.24, 0.24,
-      0.12): a step that does not lower the validation RMS by ``min_gain`` (:func:`passes_gain`) is not refitted;
-    * far above the noise one step falls short of a refit (the same seed, round 1: 701 predicted, 1729 reached),
-      so only a step that lowers the validation RMS not at all is not refitted (three-mass drive, seed 11, round 1:
-      three such places, each refused when refitted).
-    A step the linearisation mispredicts (a learned curve's steep basis: one step to a validation RMS of 0.16
-    where the refit reached 0.020) is no guide: refitted."""
+      0.12): a whole step that does not lower the validation RMS by ``min_gain`` (:func:`passes_gain`) is not
+      refitted;
+    * far above the noise one step falls short of a refit (the same seed, round 1: 701 predicted, 1729
+      reached), and so does a shortened step: one that does not lower the validation RMS at all is not refitted
+      (three-mass drive, seed 11, round 1: three such places, each refused when refitted; the complete two-mass
+      chart, seed 11: two Coulomb terms whose whole steps were poorly predicted, each refitted in 75 s at N = 24
+      and refused).
+    A step not trusted at any length that matters is no guide: refitted."""
     if not (best and settings.one_step):
         return best, []
-    bar = current.validation_rms * ((1 - settings.min_gain) if near else 1.0)
     keep, rows = [], []
     for s in best:
-        if not (s.candidate.neutral and s.step and s.predicted_cost is not None):
+        line = one_step_line(s.candidate.diagram, s.step, train, records, settings) if (
+            s.candidate.neutral and s.step and s.predicted_cost is not None) else None
+        if line is None:
             keep.append(s)
             continue
-        cost, rms = one_step_point(s.candidate.diagram, s.step, train, records, settings)
-        predicted = s.cost - s.predicted_cost
-        rho = (current.cost - cost) / predicted if predicted > 0 else math.nan
-        rows.append({"candidate": s.candidate.title(), "rho": finite_or_none(rho),
-                     "validation_rms": finite_or_none(rms), "refitted": not rho >= ONE_STEP_TRUST or rms < bar})
+        t, rho = _trusted_step(line[0], current, s.cost - s.predicted_cost)
+        rms = line[1](t) if t is not None else math.nan
+        bar = current.validation_rms * ((1 - settings.min_gain) if (near and t == 1.0) else 1.0)
+        rows.append({"candidate": s.candidate.title(), "step": t, "rho": finite_or_none(rho),
+                     "validation_rms": finite_or_none(rms), "refitted": t is None or rms < bar})
         if rows[-1]["refitted"]:
             keep.append(s)
     return keep, rows

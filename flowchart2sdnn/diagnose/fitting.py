@@ -40,7 +40,7 @@ from .fitstate import (
 
 __all__ = ["DiagnoseSettings", "Fitted", "fit_chart", "with_floor", "fit_growing", "horizons", "current_problem",
            "effect_scales", "residual_analysis", "DEFAULT_SPLIT", "VALIDATION_SEGMENTS", "gain_spread", "unpredictable",
-           "far_above_noise", "still_moving", "one_step_point"]
+           "far_above_noise", "still_moving", "one_step_point", "one_step_line"]
 
 DEFAULT_SPLIT = rules.value("default_split")
 #: The validation records are cut into about this many consecutive parts in all (at least 2 per record): the
@@ -225,28 +225,41 @@ def _validate_at(compiled, x: np.ndarray, records: Sequence[tuple[Dataset, int]]
             "rms_records": [_rms_all([m], compiled.n_outputs) for m in per]}
 
 
-def one_step_point(diagram: Diagram, step: Sequence[tuple[str, float]], train: list[Dataset], records,
-                   settings: DiagnoseSettings) -> tuple[float, float]:
-    """(training cost, validation RMS of every output as :attr:`Fitted.validation_rms`) of `diagram` at its
-    values moved by `step` ((theta name, change) pairs: a score's Gauss-Newton step, :class:`~.scored.Score`),
-    held inside the bounds: where one step of a refit lands, simulated, not linearised. inf where the chart does
-    not build or diverges."""
+def one_step_line(diagram: Diagram, step: Sequence[tuple[str, float]], train: list[Dataset], records,
+                  settings: DiagnoseSettings):
+    """``(cost, validation)`` along a score's Gauss-Newton `step` ((theta name, change) pairs,
+    :class:`~.scored.Score`) from `diagram`'s values, held inside the bounds: ``cost(t)`` the training cost and
+    ``validation(t)`` the validation RMS (every output, as :attr:`Fitted.validation_rms`) at t x the step,
+    simulated, not linearised (inf where the run diverges); None where the chart does not build."""
     try:
         problem = build_problem(diagram, train[0], settings.alignment, settings.seed, more=tuple(train[1:]))
     except (SdnnError, ValueError, KeyError):
-        return math.inf, math.inf
-    x = problem.compiled.theta0().copy()
+        return None
+    x0 = problem.compiled.theta0().copy()
+    direction = np.zeros_like(x0)
     index = {n: i for i, n in enumerate(problem.names)}
     for name, change in step:
         if name in index:
-            x[index[name]] += change
+            direction[index[name]] += change
     lower, upper = problem.bounds()
-    x = np.clip(x, lower, upper)
-    e = problem.residual(x)
-    if e is None:
-        return math.inf, math.inf
-    return 0.5 * float(e @ e), _validate_at(problem.compiled, x, records, settings.alignment,
-                                            settings.init_window)["rms_all"]
+
+    def cost(t: float) -> float:
+        e = problem.residual(np.clip(x0 + t * direction, lower, upper))
+        return math.inf if e is None else 0.5 * float(e @ e)
+
+    def validation(t: float) -> float:
+        return _validate_at(problem.compiled, np.clip(x0 + t * direction, lower, upper), records, settings.alignment,
+                            settings.init_window)["rms_all"]
+
+    return cost, validation
+
+
+def one_step_point(diagram: Diagram, step: Sequence[tuple[str, float]], train: list[Dataset], records,
+                   settings: DiagnoseSettings) -> tuple[float, float]:
+    """(training cost, validation RMS) at the whole step (:func:`one_step_line` at t = 1); inf where the chart
+    does not build."""
+    line = one_step_line(diagram, step, train, records, settings)
+    return (math.inf, math.inf) if line is None else (line[0](1.0), line[1](1.0))
 
 
 def fit_chart(diagram: Diagram, train: list[Dataset], records, settings: DiagnoseSettings, max_iter: int,

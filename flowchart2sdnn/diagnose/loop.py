@@ -6,12 +6,13 @@ One round:
 2. every effect of the library at every place and option is scored by the score test (:mod:`.score`); when the
    current fit is unpredictable and loses the record part way (a chaotic drive), also on the part of each record
    it still follows (:mod:`.tracked`), whose best place joins the refits of step 3;
-3. near the noise, a significant neutral candidate whose one Gauss-Newton step (simulated on the validation
-   records) does not lower the validation RMS by ``min_gain`` is dropped (choice.one_step_relevant); the best
+3. a significant neutral candidate whose one Gauss-Newton step, simulated, is well predicted and does not lower
+   the validation RMS (near the noise: by ``min_gain``) is dropped (choice.one_step_relevant); the best
    ``top`` places whose score is significant are refitted briefly (``refit_iter`` LM iterations),
-   from the current fit with the effect added at neutral values, and from the chart as given with every
-   accepted effect and this one added at neutral values (a refit only from the previous fit gets stuck where
-   the previous fit bent its parameters to imitate the missing effect); a candidate that is not neutral (a
+   from the current fit with the effect added at neutral values, and - far above the noise, or for a candidate
+   that is not neutral - from the chart as given with every accepted effect and this one added at neutral
+   values (a refit only from the previous fit gets stuck where the previous fit bent its parameters to imitate
+   the missing effect); a candidate that is not neutral (a
    scanned gap, clip or delay), and a neutral one whose plain refit is unpredictable (fitting.unpredictable:
    the effect made the drive chaotic, e.g. motor cogging), from the chart as given twice, on the whole records
    at once and with a growing

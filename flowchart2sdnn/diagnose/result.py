@@ -143,7 +143,7 @@ class Round:
     score_rows_added: tuple[str, ...] = ()
     second_look: tuple[str, ...] = ()
     # the significant places judged by their one Gauss-Newton step near the noise (choice.one_step_relevant):
-    # {candidate, validation_rms, refitted} each
+    # {candidate, step, rho, validation_rms, refitted} each
     one_step: tuple[Mapping[str, Any], ...] = ()
 
     @property

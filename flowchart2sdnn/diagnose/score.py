@@ -56,82 +56,24 @@ from ..diagram.curves import weight_names
 from ..diagram.model import Diagram
 from ..errors import SdnnError
 from ..identify import Problem, build_problem
+from .gauss_newton import (
+    RCOND,
+    after_current_step,
+    current_basis,
+    decrease,
+    gauss_newton_decrease,
+    gram,
+    solve,
+)
 from .noise import Layout, gain_test, score_test, step_residual
 from .scored import Baseline, Candidate, Score, Screen
 
 __all__ = ["RCOND", "Candidate", "Baseline", "Score", "Screen", "gauss_newton_decrease", "new_quantities", "screened",
            "screen"]
 
-RCOND = rules.value("rcond")
 #: the joint pass holds when the chart with every neutral patch reproduces the residual to this fraction of its
 #: largest value (rules.py)
 NEUTRAL_ROUNDOFF = rules.value("neutral_roundoff")
-
-
-# ------------------------------------------------------------------------------------------------ numerics
-def _gram(J: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gram matrix and gradient of the column-normalised Jacobian (zero columns stay zero)."""
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
-    Js = J / norms
-    return Js.T @ Js, Js.T @ e
-
-
-def _decrease(G: np.ndarray, g: np.ndarray, rcond: float = RCOND, sign: np.ndarray | None = None):
-    """1/2 g^T G^+ g and the rank; `sign[i]` = +1 (-1) keeps quantity i from stepping down (up): on a bound.
-
-    Bounds by an active set: a quantity whose unconstrained step leaves its bound is held there (its column
-    dropped) and the step recomputed, the worst offender first.
-    """
-    dec, rank, _ = _solve(G, g, rcond, sign)
-    return dec, rank
-
-
-def _solve(G: np.ndarray, g: np.ndarray, rcond: float = RCOND, sign: np.ndarray | None = None):
-    """:func:`_decrease` and the step itself, G^+ g in the Gram matrix's (column-normalised) units, 0 where held."""
-    active = np.ones(G.shape[0], dtype=bool)
-    full = np.zeros(G.shape[0])
-    while True:
-        idx = np.flatnonzero(active)
-        if idx.size == 0:
-            return 0.0, 0, full
-        Gs, gs = G[np.ix_(idx, idx)], g[idx]
-        w, V = eigh(Gs, check_finite=False)
-        if not w.size or w[-1] <= 0:
-            return 0.0, 0, full
-        keep = w > rcond * w[-1]
-        c = V[:, keep].T @ gs
-        step = V[:, keep] @ (c / w[keep])
-        if sign is not None and np.any(sign[idx] != 0):
-            wrong = step * sign[idx]
-            if np.any(wrong < 0):
-                active[idx[int(np.argmin(wrong))]] = False
-                continue
-        full[idx] = step
-        return 0.5 * float(np.sum(c * c / w[keep])), int(np.sum(keep)), full
-
-
-def gauss_newton_decrease(J: np.ndarray, e: np.ndarray, rcond: float = RCOND,
-                          sign: np.ndarray | None = None) -> tuple[float, int]:
-    """Decrease of 1/2 ||e - J d||^2 achieved by the least-squares step d, and the numerical rank used.
-
-    Parameters
-    ----------
-    J : (M, P) ndarray
-    e : (M,) ndarray
-    rcond : float
-        Eigenvalues of the Gram matrix of the column-normalised J below ``rcond`` times the largest count as
-        zero (singular values below ``sqrt(rcond)``).
-    sign : (P,) ndarray, optional
-        +1 for a quantity on its lower bound (it may only increase), -1 on its upper bound, 0 free.
-
-    Returns
-    -------
-    (decrease, rank) : ``1/2 g^T (J^T J)^+ g`` with ``g = J^T e``, and the rank used.
-    """
-    if J.ndim != 2 or J.shape[0] != e.shape[0]:
-        raise ValueError(f"J has shape {J.shape}, e has shape {e.shape}")
-    return _decrease(*_gram(J, e), rcond, None if sign is None else np.asarray(sign, dtype=float))
 
 
 def new_quantities(before: Diagram, after: Diagram) -> tuple[str, ...]:
@@ -164,7 +106,7 @@ def baseline_of(problem: Problem) -> tuple[Baseline, np.ndarray, np.ndarray]:
                            problem.diagram.file)
     e, J = out
     cost = 0.5 * float(e @ e)
-    dec, rank = _decrease(*_gram(J, e), sign=_bound_sign(problem))
+    dec, rank = decrease(*gram(J, e), sign=_bound_sign(problem))
     sigma2 = 2 * cost / max(1, e.size - rank)
     layout = Layout(tuple(len(s.targets) for s in problem.segments), problem.targets.shape[1])
     return Baseline(cost, dec, rank, e.size, J.shape[1], sigma2, layout, step_residual(J, e),
@@ -215,7 +157,7 @@ def _bound_sign(problem: Problem) -> np.ndarray:
 
 def _score_from(c: Candidate, e: np.ndarray, J: np.ndarray, base: Baseline, problem: Problem) -> Score:
     cost = 0.5 * float(e @ e)
-    dec, rank, step = _solve(*_gram(J, e), sign=_bound_sign(problem))
+    dec, rank, step = solve(*gram(J, e), sign=_bound_sign(problem))
     norms = np.linalg.norm(J, axis=0)
     norms[norms == 0] = 1.0
     named = tuple(zip(problem.names, map(float, step / norms), strict=True))
@@ -233,25 +175,6 @@ def _score_from(c: Candidate, e: np.ndarray, J: np.ndarray, base: Baseline, prob
     elif base.layout is not None:
         stat, p = _scanned_significance(base, e, J)
     return Score(c, score, cost, predicted, dof, stat, p, step=named)
-
-
-def _current_basis(J0: np.ndarray) -> np.ndarray:
-    """An orthonormal basis of the current chart's columns (directions below RCOND dropped, as in the score)."""
-    norms = np.linalg.norm(J0, axis=0)
-    norms[norms == 0] = 1.0
-    Js = J0 / norms
-    w, V = eigh(Js.T @ Js, check_finite=False)
-    if not w.size or not w[-1] > 0:
-        return np.zeros((J0.shape[0], 0))
-    keep = w > RCOND * w[-1]
-    return Js @ (V[:, keep] / np.sqrt(w[keep]))
-
-
-def _after_current_step(e: np.ndarray, basis: np.ndarray) -> float:
-    """1/2 ||e - P e||^2, P the projector on the current chart's columns (`basis`, :func:`_current_basis`): the
-    cost a patched chart would reach by moving the current quantities along their current sensitivities."""
-    r = e - basis @ (basis.T @ e)
-    return 0.5 * float(r @ r)
 
 
 def _error(c: Candidate, text: str) -> Score:
@@ -311,7 +234,7 @@ def _screen_neutral(cands: Sequence[Candidate], current: Diagram, base_names: tu
         Gon = Jo.T @ Jn
         G = np.block([[Goo, Gon], [Gon.T, Jn.T @ Jn]])
         sign = np.concatenate([bound_sign[old], bound_sign[cols]])
-        dec, rank, step = _solve(G, np.concatenate([go, Jn.T @ e]), sign=sign)
+        dec, rank, step = solve(G, np.concatenate([go, Jn.T @ e]), sign=sign)
         scaled = step / np.concatenate([norms[old], norms[cols]])  # back from the column-normalised units
         named = tuple(zip([problem.names[i] for i in old + cols], map(float, scaled), strict=True))
         predicted = base.cost - dec
@@ -385,7 +308,7 @@ def screen(candidates: Sequence[Candidate], problem: Problem, train: Sequence[Da
         scores += joint
     # not neutral: the cost of every option by simulation, the full score for the best few per place
     groups: dict[tuple[str, str], list[tuple]] = {}
-    basis = _current_basis(J0) if others else None
+    basis = current_basis(J0) if others else None
     for i, c in enumerate(others):
         if progress:
             progress(f"scan {c.title()}", (i + 1) / max(1, len(others)))
@@ -397,7 +320,7 @@ def screen(candidates: Sequence[Candidate], problem: Problem, train: Sequence[Da
             cost, err = (0.5 * float(e @ e), None) if e is not None else (None, "diverges")
         except (SdnnError, ValueError, KeyError) as exc:
             cost, err = None, _message(exc)
-        rank_cost = None if cost is None else _after_current_step(e, basis) if e.shape == e0.shape else cost
+        rank_cost = None if cost is None else after_current_step(e, basis) if e.shape == e0.shape else cost
         groups.setdefault(c.key, []).append((c, cost, err, p, rank_cost))
     for items in groups.values():
         # the options of one place in the order of their cost after the current chart's own step (the patched
