@@ -9,6 +9,7 @@ from diagnose_bench import chart, record
 
 from flowchart2sdnn.diagnose.effects import BUILTIN_EFFECTS
 from flowchart2sdnn.diagnose.loop import DiagnoseSettings, diagnose, refit_unit
+from flowchart2sdnn.diagnose.score import scan_unit, score_unit
 from flowchart2sdnn.executors import DaskExecutor, ProcessExecutor, SerialExecutor
 from flowchart2sdnn.strictjson import strict_json
 
@@ -52,16 +53,21 @@ class _Recording(SerialExecutor):
 def test_the_refits_go_through_the_executor(case):
     """Every brief refit is a work unit handed to the executor: one map per refitted candidate (from the current
     fit, and far above the noise also from the chart as given), and a round's control (the chart refitted without
-    any effect, from the same starts) in a last map."""
+    any effect, from the same starts) in a last map. The screen's options that change the model go to it too:
+    their simulations in one map a round, their full scores in another."""
     ex = _Recording()
     par = diagnose(chart("one_mass"), case["train"], [case["val"]], SETTINGS, EFFECTS, executor=ex)
     refitted = sum(1 for c in par.report["candidates"] if c.get("refitted"))
     assert len(par.report["rounds"]) == SETTINGS.rounds
     controls = sum(1 for r in par.report["rounds"] if r["control"] is not None)
     assert controls >= 1
-    assert {fn for fn, _ in ex.calls} == {refit_unit}
-    assert len(ex.calls) == refitted + controls
-    assert all(n in (1, 2) for _, n in ex.calls) and 2 in [n for _, n in ex.calls]
+    refits = [n for fn, n in ex.calls if fn is refit_unit]
+    assert len(refits) == refitted + controls
+    assert all(n in (1, 2) for n in refits) and 2 in refits
+    scans = [n for fn, n in ex.calls if fn is scan_unit]
+    scored = sum(1 for c in par.report["candidates"] if c["effect"] == "saturation" and c["score"] is not None)
+    assert len(scans) == SETTINGS.rounds and sum(n for fn, n in ex.calls if fn is score_unit) == scored
+    assert {fn for fn, _ in ex.calls} == {refit_unit, scan_unit, score_unit}
     assert _without_timing(par.report) == _without_timing(case["serial"].report)
 
 

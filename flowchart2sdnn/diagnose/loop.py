@@ -179,7 +179,7 @@ def diagnose(diagram: Diagram, train: Dataset | Sequence[Dataset], validation: S
                 stop_reason = "no_candidates"
                 break
             say(f"round {r}: score test of {len(cands)} candidates", None)
-            scr = screen(cands, problem, train, settings.alignment, settings.seed, settings.top_options, say)
+            scr = screen(cands, problem, train, settings.alignment, settings.seed, settings.top_options, say, executor)
             screens.append(scr)
             timing["screen"].append(scr.seconds)
             best = refit_set(scr, settings)

@@ -44,6 +44,7 @@ refit; acceptance is decided by the refits.
 from __future__ import annotations
 
 import math
+import pickle
 from collections.abc import Callable, Sequence
 
 import numpy as np
@@ -256,7 +257,7 @@ def _score_one(c: Candidate, base: Baseline, train: Sequence[Dataset], alignment
             return _error(c, _message(exc))
     out = _fun(problem)
     if out is None:
-        return _error(c, "the patched chart diverges on the training record")
+        return _error(c, _DIVERGES)
     return _score_from(c, out[0], out[1], base, problem)
 
 
@@ -266,9 +267,41 @@ def _message(exc: Exception) -> str:
     return f"{type(exc).__name__}: {exc}"
 
 
+_DIVERGES = "the patched chart diverges on the training record"
+
+
+def scan_unit(unit: tuple) -> tuple[float | None, str | None, np.ndarray | None]:
+    """One option of a candidate that changes the model, simulated: (candidate, train, alignment, seed) ->
+    (cost, error, residual). Module level, so that any executor's worker runs it."""
+    c, train, alignment, seed = unit
+    try:
+        p = _build(screened(c), train, alignment, seed)
+        e = p.residual(p.compiled.theta0())
+    except (SdnnError, ValueError, KeyError) as exc:
+        return None, _message(exc), None
+    return (None, _DIVERGES, None) if e is None else (0.5 * float(e @ e), None, e)
+
+
+def score_unit(unit: tuple) -> Score:
+    """One option's full score: (candidate, baseline, train, alignment, seed) -> Score (an RTRL pass)."""
+    c, base, train, alignment, seed = unit
+    return _score_one(c, base, train, alignment, seed)
+
+
+def _map(executor, fn, units: list) -> list:
+    """`fn` over `units` in order, by the executor when there is one and it can take them (an effect a user
+    wrote may not pickle: then here)."""
+    if executor is None or len(units) < 2:
+        return list(map(fn, units))
+    try:
+        return list(executor.map(fn, units))
+    except (pickle.PicklingError, TypeError, AttributeError):
+        return list(map(fn, units))
+
+
 def screen(candidates: Sequence[Candidate], problem: Problem, train: Sequence[Dataset], alignment: str = "zoh",
            seed: int = 0, top_options: int = 3,
-           progress: Callable[[str, float | None], None] | None = None) -> Screen:
+           progress: Callable[[str, float | None], None] | None = None, executor=None) -> Screen:
     """Score every candidate against the current chart (`problem`, at its current values).
 
     Parameters
@@ -282,6 +315,9 @@ def screen(candidates: Sequence[Candidate], problem: Problem, train: Sequence[Da
     top_options : int
         For an effect that is not neutral, the options (per place) with the lowest simulated cost after the
         current chart's own step that get the full score; the others keep only their simulated cost.
+    executor : a :mod:`flowchart2sdnn.executors` executor, optional
+        Runs the options' simulations and full scores (:func:`scan_unit`, :func:`score_unit`); the same results
+        as in this process.
 
     Returns
     -------
@@ -306,34 +342,28 @@ def screen(candidates: Sequence[Candidate], problem: Problem, train: Sequence[Da
             joint = [_score_one(c, base, train, alignment, seed) for c in neutral]
             passes["jacobian"] += len(neutral)
         scores += joint
-    # not neutral: the cost of every option by simulation, the full score for the best few per place
+    # not neutral: the cost of every option by simulation, the full score for the best few per place (both
+    # independent work units, run by the executor when there is one)
     groups: dict[tuple[str, str], list[tuple]] = {}
     basis = current_basis(J0) if others else None
-    for i, c in enumerate(others):
-        if progress:
-            progress(f"scan {c.title()}", (i + 1) / max(1, len(others)))
-        p = None
-        try:
-            p = _build(screened(c), train, alignment, seed)
-            e = p.residual(p.compiled.theta0())
-            passes["simulation"] += 1
-            cost, err = (0.5 * float(e @ e), None) if e is not None else (None, "diverges")
-        except (SdnnError, ValueError, KeyError) as exc:
-            cost, err = None, _message(exc)
+    if progress and others:
+        progress(f"scan {len(others)} options of candidates that change the model", None)
+    for c, (cost, err, e) in zip(others, _map(executor, scan_unit, [(c, train, alignment, seed) for c in others]),
+                                 strict=True):
+        passes["simulation"] += err is None or err == _DIVERGES
         rank_cost = None if cost is None else after_current_step(e, basis) if e.shape == e0.shape else cost
-        groups.setdefault(c.key, []).append((c, cost, err, p, rank_cost))
+        groups.setdefault(c.key, []).append((c, cost, err, rank_cost))
+    full, rest = [], []
     for items in groups.values():
         # the options of one place in the order of their cost after the current chart's own step (the patched
         # chart's sensitivities taken as the current one's): a scan's best option by its plain cost is not the
         # best once the other quantities move (a dead time's n), and the full score of every option cost an RTRL
         # pass each, 90 a round on the two-mass drive
-        ok = sorted((x for x in items if x[1] is not None), key=lambda x: x[4])
-        for rank, (c, cost, _, p, _) in enumerate(ok):
-            if rank < top_options:
-                scores.append(_score_one(c, base, train, alignment, seed, p))
-                passes["jacobian"] += 1
-            else:
-                scores.append(Score(c, math.nan, cost, None))
-        scores += [_error(c, err or "failed") for c, cost, err, _, _ in items if cost is None]
+        ok = sorted((x for x in items if x[1] is not None), key=lambda x: x[3])
+        full += [c for c, *_ in ok[:top_options]]
+        rest += [Score(c, math.nan, cost, None) for c, cost, *_ in ok[top_options:]]
+        rest += [_error(c, err or "failed") for c, cost, err, _ in items if cost is None]
+    scores += _map(executor, score_unit, [(c, base, train, alignment, seed) for c in full]) + rest
+    passes["jacobian"] += len(full)
     ranked = sorted(scores, key=lambda s: (not s.scored, -(s.score if s.scored else 0.0)))
     return Screen(base, tuple(ranked), time.perf_counter() - t0, passes)
