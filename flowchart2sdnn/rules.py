@@ -100,13 +100,15 @@ _BOOK: tuple[Rule, ...] = (
     _r("trust_poor_gain", 0.25, "gain ratio", "A step whose actual decrease is below a quarter of the model's "
        "was poorly predicted: the trust radius shrinks (Moré 1978).", "fit.steps.TRUST_POOR",
        "diagnose.choice.ONE_STEP_TRUST (a candidate's one Gauss-Newton step, simulated, says where its refit goes "
-       "only when so predicted)",
+       "only when so predicted)", "diagnose.fitstate._TRUST (an unfinished first fit moves only as far as its "
+       "step is so predicted)",
        note="equal to trust_shrink, linearity_tol, dense_fraction by coincidence"),
     _r("trust_good_gain", 0.75, "gain ratio", "A step whose actual decrease is above three quarters of the "
        "model's was well predicted: the trust radius grows (Moré 1978).", "fit.steps.TRUST_GOOD",
        note="equal to identify_geodesic by coincidence"),
     _r("trust_shrink", 0.25, "fraction of the step", "After a poor gain or a refusal the radius becomes a "
        "quarter of the step (Moré 1978).", "fit.steps.TRUST_SHRINK", "fit.lm._trials", "diagnose.choice.ONE_STEP_SHRINK",
+       "diagnose.fitstate._SHRINK",
        note="equal to trust_poor_gain, linearity_tol, dense_fraction by coincidence"),
     _r("trust_grow", 2.0, "multiple of the step", "After a good gain the radius becomes twice the step (Moré "
        "1978).", "fit.steps.TRUST_GROW", note="equal to noise_margin, spread_z by coincidence"),

@@ -164,3 +164,32 @@ def test_still_moving_names_what_one_iteration_left_and_nothing_at_the_minimum(r
     step = np.linalg.lstsq(J, e, rcond=None)[0]
     i = p.names.index(moving[0])
     assert abs(step[i]) > np.sqrt(float(e @ e) / len(e) * np.linalg.pinv(J.T @ J)[i, i])
+
+
+class _Cubic:
+    """A one-quantity problem y = x^3 with the record y = 8: the Gauss-Newton step from x = 0.5 overshoots to 11."""
+
+    def bounds(self):
+        return np.array([-np.inf]), np.array([np.inf])
+
+    def residual(self, x):
+        return np.array([8.0 - x[0] ** 3])
+
+
+def test_a_step_counts_only_as_far_as_it_is_trusted():
+    """still_moving's trusted part of the Gauss-Newton step (fitstate._trusted_length), against the hand-worked
+    trust-region shortening: from x = 0.5 the whole step 10.5 raises the cost from 31.0 to 8.8e5, the quarter step
+    (x = 3.125) to 253; at 1/16 (x = 1.156) the cost falls by 10.2 where the linearisation predicts 3.75: trusted."""
+    from flowchart2sdnn.diagnose.fitstate import _trusted_length
+
+    x = np.array([0.5])
+    e = 8.0 - 0.125
+    step = np.array([e / 0.75])
+    cost, predicted = 0.5 * e * e, 0.5 * e * e
+    t = _trusted_length(_Cubic(), x, step, cost, predicted, unit=1e-3)
+    assert t == 1 / 16
+    for longer in (1.0, 0.25):
+        fall = cost - 0.5 * (8.0 - (0.5 + longer * step[0]) ** 3) ** 2
+        assert fall < 0.25 * (2 * longer - longer ** 2) * predicted
+    # nothing worth moving: the part still trusted-or-not would gain less than one unit before it is trusted
+    assert _trusted_length(_Cubic(), x, step, cost, predicted, unit=10.0) == 0.0
