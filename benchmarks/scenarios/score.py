@@ -39,7 +39,10 @@ def run_one(seed: int, category: str | None, family: str | None, seconds: float 
             root: str, dry: bool, rounds: int) -> dict:
     """Draw scenario `seed`, write it under `root`, and (unless `dry`) diagnose and judge it: one result row."""
     t0 = time.perf_counter()
-    scenario = draw(seed, category, family, seconds, sensor)
+    try:
+        scenario = draw(seed, category, family, seconds, sensor)
+    except (ValueError, FloatingPointError) as exc:  # the generator's own plant blew up: nothing to judge
+        return {"seed": seed, "draw_failed": str(exc)}
     paths = write_scenario(scenario, Path(root) / f"seed{seed}")
     row = {"seed": seed, "category": scenario.category, "family": scenario.family,
            "sensor": scenario.sensor.kind, "seconds_record": round(scenario.seconds, 1),
@@ -73,6 +76,8 @@ def run_one(seed: int, category: str | None, family: str | None, seconds: float 
 
 
 def _line(r: dict) -> str:
+    if "draw_failed" in r:
+        return f"seed {r['seed']:>10} not drawn: the generator's plant failed ({r['draw_failed']})"
     head = (f"seed {r['seed']:>10} {r['category']:<26} {r['family']:<10} {r['sensor']:<7} "
             f"{r['seconds_record']:>5.1f} s  missing: {', '.join(r['missing']) or 'nothing'}")
     if r.get("unexposed"):
@@ -118,7 +123,7 @@ def main(argv: list[str] | None = None) -> int:
             print(_line(rows[-1]), flush=True)
     if not args.dry:
         print()
-        for line in summarise(rows):
+        for line in summarise([r for r in rows if "draw_failed" not in r]):
             print(line)
         (Path(root) / "rows.json").write_text(json.dumps(rows, indent=1, default=str))
     return 0
