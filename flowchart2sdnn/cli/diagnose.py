@@ -129,7 +129,7 @@ EFFECTS = {"Effect search": ("rounds", "effect_names", "effects_file", "top", "s
 @lags_option()
 @force_option()
 @click.option("--quiet", is_flag=True, help="No progress, report text or 'wrote' lines (errors still go to stderr).")
-@executor_options("the candidate refits")
+@executor_options("the scanned options and candidate refits")
 @handle_errors
 def diagnose(paths, diagram, validation, split, output, report_path, rounds, effect_names, effects_file, plots,
              refit_iter, max_iter, horizon, top, second_look, criterion, min_gain, spread_z, alpha, dead_time_max, harmonics, init_window,
