@@ -316,7 +316,7 @@ _BOOK: tuple[Rule, ...] = (
        "standard errors.", "diagnose.fitting.DiagnoseSettings.spread_z", flags=("diagnose --spread-z",),
        note="equal to trust_grow, noise_margin by coincidence"),
     _r("rcond", 1e-12, "relative singular value", "The score test's least squares treat smaller singular values "
-       "as zero.", "diagnose.gauss_newton.RCOND", "diagnose.noise.RCOND",
+       "as zero.", "diagnose.gauss_newton.RCOND",
        note="equal to lm_min_rel_step, cost_rounding, initstate_min_rel_cost_change by coincidence"),
     _r("noise_lag_window", 1 / 30, "fraction of a record", "The score test's noise spectrum: the residual's "
        "covariances up to 1/30 of the record (1 s of 30 s), far past a sensor's or a speed estimate's memory, "

@@ -14,16 +14,21 @@ from scipy.linalg import eigh
 
 from .. import rules
 
-__all__ = ["RCOND", "gram", "decrease", "solve", "gauss_newton_decrease", "current_basis", "after_current_step"]
+__all__ = ["RCOND", "column_norms", "gram", "decrease", "solve", "gauss_newton_decrease", "current_basis", "after_current_step"]
 
 RCOND = rules.value("rcond")
 
 
-def gram(J: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Gram matrix and gradient of the column-normalised Jacobian (zero columns stay zero)."""
+def column_norms(J: np.ndarray) -> np.ndarray:
+    """The columns' norms, 1 for a zero column (which then stays zero when divided)."""
     norms = np.linalg.norm(J, axis=0)
     norms[norms == 0] = 1.0
-    Js = J / norms
+    return norms
+
+
+def gram(J: np.ndarray, e: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Gram matrix and gradient of the column-normalised Jacobian (zero columns stay zero)."""
+    Js = J / column_norms(J)
     return Js.T @ Js, Js.T @ e
 
 
@@ -86,9 +91,7 @@ def gauss_newton_decrease(J: np.ndarray, e: np.ndarray, rcond: float = RCOND,
 
 def current_basis(J0: np.ndarray) -> np.ndarray:
     """An orthonormal basis of the current chart's columns (directions below RCOND dropped, as in the score)."""
-    norms = np.linalg.norm(J0, axis=0)
-    norms[norms == 0] = 1.0
-    Js = J0 / norms
+    Js = J0 / column_norms(J0)
     w, V = eigh(Js.T @ Js, check_finite=False)
     if not w.size or not w[-1] > 0:
         return np.zeros((J0.shape[0], 0))
@@ -98,6 +101,7 @@ def current_basis(J0: np.ndarray) -> np.ndarray:
 
 def after_current_step(e: np.ndarray, basis: np.ndarray) -> float:
     """1/2 ||e - P e||^2, P the projector on the current chart's columns (`basis`, :func:`current_basis`): the
-    cost a patched chart would reach by moving the current quantities along their current sensitivities."""
+    cost a patched chart would reach by moving the current quantities along their current sensitivities (the
+    cost of :func:`~.noise.step_residual`, the basis computed once for many residuals)."""
     r = e - basis @ (basis.T @ e)
     return 0.5 * float(r @ r)

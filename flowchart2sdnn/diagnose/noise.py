@@ -31,13 +31,13 @@ from scipy.linalg import eigh
 from scipy.stats import chi2, norm
 
 from .. import rules
+from .gauss_newton import RCOND, current_basis
 
 __all__ = ["NOISE_LAG_WINDOW", "Layout", "NoiseSpectrum", "noise_spectrum", "step_residual", "score_test",
            "gain_test"]
 
 #: the covariances are estimated up to this fraction of each record's rows (rules.py)
 NOISE_LAG_WINDOW = rules.value("noise_lag_window")
-RCOND = rules.value("rcond")
 
 
 @dataclass(frozen=True)
@@ -107,15 +107,9 @@ def noise_spectrum(e: np.ndarray, layout: Layout, window: float = NOISE_LAG_WIND
 
 def step_residual(X: np.ndarray, e: np.ndarray) -> np.ndarray:
     """The residual after the full (unbounded) Gauss-Newton step: e with its least-squares projection on X's
-    columns taken out (directions below RCOND dropped, as in the score)."""
-    norms = np.linalg.norm(X, axis=0)
-    norms[norms == 0] = 1.0
-    Xs = X / norms
-    w, V = eigh(Xs.T @ Xs, check_finite=False)
-    if not w.size or not w[-1] > 0:
-        return e
-    keep = w > RCOND * w[-1]
-    return e - Xs @ (V[:, keep] @ ((V[:, keep].T @ (Xs.T @ e)) / w[keep]))
+    columns taken out (directions below RCOND dropped, as in the score: :func:`~.gauss_newton.current_basis`)."""
+    basis = current_basis(X)
+    return e - basis @ (basis.T @ e)
 
 
 def score_test(layout: Layout, J_perp: np.ndarray, e: np.ndarray, e_current: np.ndarray

@@ -60,6 +60,7 @@ from ..identify import Problem, build_problem
 from .gauss_newton import (
     RCOND,
     after_current_step,
+    column_norms,
     current_basis,
     decrease,
     gauss_newton_decrease,
@@ -159,8 +160,7 @@ def _bound_sign(problem: Problem) -> np.ndarray:
 def _score_from(c: Candidate, e: np.ndarray, J: np.ndarray, base: Baseline, problem: Problem) -> Score:
     cost = 0.5 * float(e @ e)
     dec, rank, step = solve(*gram(J, e), sign=_bound_sign(problem))
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
+    norms = column_norms(J)
     named = tuple(zip(problem.names, map(float, step / norms), strict=True))
     predicted = cost - dec
     score = base.gn_cost - predicted
@@ -170,8 +170,6 @@ def _score_from(c: Candidate, e: np.ndarray, J: np.ndarray, base: Baseline, prob
         index = {n: i for i, n in enumerate(problem.names)}
         old = [index[n] for n in base.names if n in index]
         new = [i for i, n in enumerate(problem.names) if n not in set(base.names)]
-        norms = np.linalg.norm(J, axis=0)
-        norms[norms == 0] = 1.0
         stat, p = _neutral_significance(base, J[:, old] / norms[old], J[:, new] / norms[new], e)
     elif base.layout is not None:
         stat, p = _scanned_significance(base, e, J)
@@ -219,8 +217,7 @@ def _screen_neutral(cands: Sequence[Candidate], current: Diagram, base_names: tu
         return None  # some patch was not neutral after all: score them one by one
     index = {n: i for i, n in enumerate(problem.names)}
     bound_sign = _bound_sign(problem)
-    norms = np.linalg.norm(J, axis=0)
-    norms[norms == 0] = 1.0
+    norms = column_norms(J)
     old = [index[n] for n in base_names]
     Jo = J[:, old] / norms[old]
     Goo, go = Jo.T @ Jo, Jo.T @ e
